@@ -1,0 +1,5 @@
+//! Criterion benchmarks for `mitergate`.
+use criterion::Criterion;
+
+/// Registers the `mitergate` benchmarks.
+pub fn benches(_c: &mut Criterion) {}

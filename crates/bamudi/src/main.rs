@@ -1,0 +1,4 @@
+//! The `bamudi` command-line interface.
+fn main() {
+    println!("bamudi: not yet implemented");
+}

@@ -1,0 +1,1 @@
+//! `seqnet`: A hand-written LSTM with backpropagation through time, batched GEMM kernels, Adam/SGD training.

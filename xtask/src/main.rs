@@ -1,0 +1,2 @@
+//! Developer tasks for the bamudi workspace.
+fn main() {}
