@@ -1,0 +1,122 @@
+//! Static condensation of the gate to its quoin and gauges (Eq. 47) by adjoint solves.
+//!
+//! With `K` the supported stiffness, `b_g` the strain functional of gauge `g` and `Q` the unit
+//! quoin loads (along `n` and `t` at the `m` quoin nodes):
+//!
+//! * `K X = Q` (`2m` solves) gives the quoin flexibility `C = Qᵀ X` (Maxwell–Betti: symmetric);
+//! * `K Λ = B` (one adjoint solve per gauge) gives the nodal gauge sensitivities `Λᵀ Q` and the
+//!   strain matrix `A = Λᵀ Q blockdiag(T, T)` (never `2 N_u` forward solves);
+//! * the water terms are `Λᵀ f_w(h)` and `Xᵀ f_w(h)` tabulated with their `h`-derivatives at the
+//!   skin-node heights (exact piecewise cubics, [`HydrostaticTable`]).
+
+use crate::GateError;
+use crate::condensed::{CondensedGate, HydrostaticTable};
+use crate::loads::load_transfer;
+use crate::model::{GateModel, dmatrix};
+use faer::Mat;
+use nalgebra::DMatrix;
+
+/// Default number of quoin force representation points (paper Sec. 4.2).
+pub const DEFAULT_NU: usize = 509;
+
+impl GateModel {
+    /// Condenses the gate to `nu` uniformly spaced quoin representation points over `[0, H]`
+    /// (the paper uses `nu = 509`, [`DEFAULT_NU`]).
+    ///
+    /// ```
+    /// use mitergate::{GateConfig, GateModel};
+    /// let mut cfg = GateConfig::default();
+    /// cfg.mesh.element_size = 96.0;
+    /// let model = GateModel::build(&cfg).unwrap();
+    /// let cg = model.condense(51).unwrap();
+    /// assert_eq!(cg.a_matrix.shape(), (7, 102));
+    /// ```
+    pub fn condense(&self, nu: usize) -> Result<CondensedGate, GateError> {
+        if nu < 2 {
+            return Err(GateError::InvalidInput {
+                what: "nu".into(),
+                reason: format!("need at least 2 representation points, got {nu}"),
+            });
+        }
+        let h = self.config().geometry.quoin_height;
+        let nu_points: Vec<f64> = (0..nu).map(|b| h * b as f64 / (nu - 1) as f64).collect();
+        let heights = self.quoin_heights();
+        let m = heights.len();
+        let n_g = self.gauges().len();
+        let fe = self.fe();
+        // right-hand sides: 2m unit quoin loads, then one adjoint load per gauge
+        let mut loads = self.quoin_unit_loads();
+        loads.extend(self.gauges().iter().map(|g| g.terms.clone()));
+        let sol = fe.solve_sparse_loads(&loads);
+        let reduced: Vec<Vec<(usize, f64)>> = loads.iter().map(|l| fe.reduce_sparse(l)).collect();
+        let dot = |load: &[(usize, f64)], col: usize| {
+            load.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>()
+        };
+        // C[i][j] = Q_iᵀ K⁻¹ Q_j
+        let c = dmatrix(2 * m, 2 * m, |i, j| dot(&reduced[i], j));
+        // nodal gauge sensitivities G[g][j] = λ_gᵀ Q_j
+        let g_nodal = dmatrix(n_g, 2 * m, |g, j| dot(&reduced[j], 2 * m + g));
+        let t = load_transfer(&heights, &nu_points)?;
+        let mut a = DMatrix::zeros(n_g, 2 * nu);
+        a.columns_mut(0, nu)
+            .copy_from(&(g_nodal.columns(0, m) * &t));
+        a.columns_mut(nu, nu)
+            .copy_from(&(g_nodal.columns(m, m) * &t));
+        let (water_strain, water_quoin) = self.water_tables(&sol, m, n_g)?;
+        Ok(CondensedGate {
+            quoin_height: h,
+            quoin_node_heights: heights,
+            quoin_flexibility: c,
+            water_quoin_displacement: water_quoin,
+            gauge_names: self.gauge_names(),
+            water_strain,
+            nu_points,
+            load_transfer: t,
+            a_matrix: a,
+        })
+    }
+
+    /// Hydrostatic tables of gauge strains (columns `2m..2m+n_g` of `sol`) and quoin
+    /// displacements (columns `0..2m`) at the skin-node heights.
+    fn water_tables(
+        &self,
+        sol: &Mat<f64>,
+        m: usize,
+        n_g: usize,
+    ) -> Result<(HydrostaticTable, HydrostaticTable), GateError> {
+        let fe = self.fe();
+        let mut bp: Vec<f64> = self
+            .mesh()
+            .skin_elements()
+            .iter()
+            .flat_map(|&e| {
+                self.mesh().shell.elements[e]
+                    .nodes
+                    .map(|n| self.mesh().shell.nodes[n][2])
+            })
+            .collect();
+        bp.sort_by(f64::total_cmp);
+        bp.dedup();
+        let nb = bp.len();
+        let mut sv = DMatrix::zeros(nb, n_g);
+        let mut ss = DMatrix::zeros(nb, n_g);
+        let mut qv = DMatrix::zeros(nb, 2 * m);
+        let mut qs = DMatrix::zeros(nb, 2 * m);
+        for (k, &z) in bp.iter().enumerate() {
+            for (deriv, strain, quoin) in [(false, &mut sv, &mut qv), (true, &mut ss, &mut qs)] {
+                let f = fe.reduce_sparse(&self.water_load_sparse(z, deriv)?);
+                let dot = |col: usize| f.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>();
+                for g in 0..n_g {
+                    strain[(k, g)] = dot(2 * m + g);
+                }
+                for j in 0..2 * m {
+                    quoin[(k, j)] = dot(j);
+                }
+            }
+        }
+        Ok((
+            HydrostaticTable::new(bp.clone(), sv, ss)?,
+            HydrostaticTable::new(bp, qv, qs)?,
+        ))
+    }
+}

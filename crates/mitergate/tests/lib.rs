@@ -1,0 +1,3 @@
+//! Integration tests of `mitergate`: the shell element, the gate model and its condensation.
+
+mod suite;

@@ -1,0 +1,4 @@
+pub mod common;
+mod config;
+mod element;
+mod gate;
