@@ -1,2 +1,137 @@
-//! Developer tasks for the bamudi workspace.
-fn main() {}
+//! Developer tasks for the bamudi workspace (`cargo xtask <task>`, run in release mode).
+//!
+//! * `reproduce-paper [--quick] [--json PATH] [--out DIR]`: both scenarios of the paper's Table 1
+//!   on the embedded default gate; writes `docs/results/reproduce-paper.md` and plots.
+//! * `calculix-check [--element-size IN] [--dir DIR] [--ccx PATH] [--equation] [--report PATH]`:
+//!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
+//!   displacements (needs `ccx` on PATH; see docs/verification.md).
+
+mod calculix;
+mod plots;
+
+use anyhow::{Context, Result};
+use bamudi::paper::{self, ReproduceOptions};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(name = "xtask", about = "bamudi developer tasks")]
+struct Cli {
+    #[command(subcommand)]
+    task: Task,
+}
+
+#[derive(Subcommand)]
+enum Task {
+    /// Reproduce the paper's case study (Sec. 4.3, Table 1, Fig. 13-22) end to end.
+    ReproducePaper {
+        /// CI-sized run (coarser mesh, fewer experiments, exact linear estimator).
+        #[arg(long)]
+        quick: bool,
+        /// Also write the numbers as JSON to this path.
+        #[arg(long)]
+        json: Option<PathBuf>,
+        /// Output directory for the report and plots.
+        #[arg(long, default_value = "docs/results")]
+        out: PathBuf,
+        /// Master seed.
+        #[arg(long, default_value_t = 2021)]
+        seed: u64,
+        /// Skip the sampling-rule sensitivity study.
+        #[arg(long)]
+        no_sensitivity: bool,
+        /// Run the sensitivity study even with `--quick`.
+        #[arg(long)]
+        sensitivity: bool,
+    },
+    /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
+    CalculixCheck {
+        /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
+        #[arg(long, default_value_t = 24.0)]
+        element_size: f64,
+        /// Working directory for the deck and the CalculiX results.
+        #[arg(long, default_value = "target/calculix-check")]
+        dir: PathBuf,
+        /// CalculiX executable.
+        #[arg(long, default_value = "ccx")]
+        ccx: String,
+        /// Write the miter roller as *EQUATION instead of *TRANSFORM.
+        #[arg(long)]
+        equation: bool,
+        /// Also write the Markdown report to this file.
+        #[arg(long)]
+        report: Option<PathBuf>,
+    },
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.task {
+        Task::ReproducePaper {
+            quick,
+            json,
+            out,
+            seed,
+            no_sensitivity,
+            sensitivity,
+        } => reproduce(quick, json, out, seed, no_sensitivity, sensitivity),
+        Task::CalculixCheck {
+            element_size,
+            dir,
+            ccx,
+            equation,
+            report,
+        } => calculix::run(&calculix::CalculixCheck {
+            element_size,
+            work_dir: dir,
+            ccx,
+            equation,
+            report,
+        }),
+    }
+}
+
+fn reproduce(
+    quick: bool,
+    json: Option<PathBuf>,
+    out: PathBuf,
+    seed: u64,
+    no_sensitivity: bool,
+    sensitivity: bool,
+) -> Result<()> {
+    let mut opts = if quick {
+        ReproduceOptions::quick()
+    } else {
+        ReproduceOptions::paper()
+    };
+    opts.seed = seed;
+    opts.sensitivity = (opts.sensitivity || sensitivity) && !no_sensitivity;
+    opts.progress = std::env::var_os("CI").is_none();
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let report = paper::reproduce(&opts, |res, cal, model| {
+        eprintln!(
+            "{}: rho* = {:.3}, theta = {:.2} ± {:.2} (truth {})",
+            res.name,
+            res.rho_star,
+            res.theta_posterior.mean,
+            res.theta_posterior.sd,
+            res.theta_true
+        );
+        plots::scenario_plots(&out, res, cal, model)
+            .map_err(|e| bamudi::BamudiError::Calibration(format!("plots: {e:#}")))
+    })?;
+    let md = report.markdown();
+    println!("{md}");
+    let md_path = out.join(if quick {
+        "reproduce-paper-quick.md"
+    } else {
+        "reproduce-paper.md"
+    });
+    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    if let Some(path) = json {
+        std::fs::write(&path, report.to_json()?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    eprintln!("wrote {}", md_path.display());
+    Ok(())
+}

@@ -1,5 +1,63 @@
-//! Criterion benchmarks for `gp`.
+//! Criterion benchmarks for `gp`: the issue-2 anchor workload against scikit-learn.
+//!
+//! Data: the seed-0 anchor set of `/work/shared/anchors/gp_anchor.py` (500 points, 2-D inputs
+//! in inches), written to `crates/gp/tests/data/anchor_n500.csv` by
+//! `scripts/gp_vs_sklearn.py`. Model: SE-ARD + white noise, zero mean on standardised outputs
+//! (= scikit-learn's `normalize_y=True`), default start + 5 random restarts.
 use criterion::Criterion;
+use gp::{GpParams, Kernel, Mean};
+use nalgebra::DMatrix;
+use std::hint::black_box;
+
+/// Reads the anchor CSV (header `x0,x1,y`).
+fn anchor_data() -> (DMatrix<f64>, Vec<f64>) {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../crates/gp/tests/data/anchor_n500.csv"
+    );
+    let text = std::fs::read_to_string(path).expect("anchor CSV (run scripts/gp_vs_sklearn.py)");
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().expect("number")).collect())
+        .collect();
+    let x = DMatrix::from_fn(rows.len(), 2, |i, j| rows[i][j]);
+    let y = rows.iter().map(|r| r[2]).collect();
+    (x, y)
+}
+
+/// The 50 x 50 prediction grid of the anchor (2,500 points).
+fn grid() -> DMatrix<f64> {
+    let g: Vec<f64> = (0..50).map(|i| 24.0 + 720.0 * i as f64 / 49.0).collect();
+    DMatrix::from_fn(2500, 2, |r, c| if c == 0 { g[r % 50] } else { g[r / 50] })
+}
+
+fn params() -> GpParams {
+    GpParams::new()
+        .kernel(Kernel::SquaredExponential { ard: true })
+        .mean(Mean::Zero)
+        .restarts(5)
+        .seed(0)
+}
 
 /// Registers the `gp` benchmarks.
-pub fn benches(_c: &mut Criterion) {}
+pub fn benches(c: &mut Criterion) {
+    let (x, y) = anchor_data();
+    let model = params().fit(&x, &y).expect("anchor fit");
+    eprintln!(
+        "gp anchor fit: lml_standardised={:.4} lml_original={:.4} hyper={:?}",
+        model.log_marginal_likelihood_standardized(),
+        model.log_marginal_likelihood(),
+        model.hyperparameters()
+    );
+    let mut group = c.benchmark_group("gp");
+    group.sample_size(10);
+    group.bench_function("fit_n500_d2_5restarts", |b| {
+        b.iter(|| params().fit(black_box(&x), black_box(&y)).unwrap())
+    });
+    let xs = grid();
+    group.bench_function("predict_mean_var_2500", |b| {
+        b.iter(|| model.predict(black_box(&xs)).unwrap())
+    });
+    group.finish();
+}

@@ -40,19 +40,40 @@
 //!
 //! See `docs/mitergate.md` for the model description and `docs/verification.md` for the
 //! element and model verification.
+//!
+//! # Contact, truth and trait implementations (paper Sec. 4.1-4.3)
+//!
+//! * [`condensed`]: the condensed gate (`C`, `T`, `A`, water tables), the contract between
+//!   the FE model and everything downstream.
+//! * [`contact`]: the quoin contact model `g_BC(x, θ)` with a bottom gap (Eq. 45-46): linear
+//!   normal springs without tension, the bilinear tangential law, solved exactly by an
+//!   active-set method on the `2m`-sized condensed system (see `docs/contact.md`).
+//! * [`truth`]: the paper's synthetic truth (Sec. 4.3, Eq. 53-54, Table 1) and a check that
+//!   the discrepancy is visible through the gauges.
+//! * [`gate_model`]: `mlmodel` trait implementations (contact forces as the unobservable
+//!   model, strains as the linear observable model).
+//! * [`field`]: a field-data simulator (months of lockages, pools, temperatures and gauge
+//!   effects such as thermal strain, drift or a growing gap) around any true strain function,
+//!   for the close-the-loop workflow of `bamudi::closeloop` (see `docs/closeloop.md`).
 
 // `!(x > 0.0)` is used on purpose throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod calculix;
 mod condense;
 pub mod condensed;
 pub mod config;
+pub mod contact;
 pub mod fe;
+pub mod field;
+pub mod gate_model;
+pub mod inp;
 pub mod loads;
 pub mod mesh;
 mod model;
 pub mod plot;
 pub mod shell;
+pub mod truth;
 
 pub use condense::DEFAULT_NU;
 pub use config::GateConfig;
@@ -170,6 +191,21 @@ pub enum GateError {
     /// A dense linear solve failed (singular matrix).
     #[error("dense solve failed: {0}")]
     DenseSolve(String),
+    /// An Abaqus / CalculiX input deck could not be parsed.
+    #[error("cannot parse .inp deck at line {line}: {reason}")]
+    InpParse {
+        /// Line of the deck (1-based).
+        line: usize,
+        /// What is wrong (names the keyword or field).
+        reason: String,
+    },
+    /// A parsed deck cannot be built into a shell stiffness model (unsupported element,
+    /// undefined set, missing section or material, unsupported constraint).
+    #[error("cannot build a shell model from the .inp deck: {0}")]
+    InpBuild(String),
+    /// Running CalculiX or reading its results failed.
+    #[error("CalculiX cross-check: {0}")]
+    CalculiX(String),
     /// Plotting failed.
     #[error("plotting to `{path}` failed: {message}")]
     Plot {
@@ -177,6 +213,67 @@ pub enum GateError {
         path: std::path::PathBuf,
         /// Backend message.
         message: String,
+    },
+    /// A contact-model hyper-parameter is invalid.
+    #[error("invalid contact parameter `{name}` = {value}: {reason}")]
+    InvalidContactParameter {
+        /// Parameter name.
+        name: &'static str,
+        /// Offending value.
+        value: f64,
+        /// Why it is invalid.
+        reason: String,
+    },
+    /// A condensed gate handed to the contact / strain model is inconsistent.
+    #[error("invalid condensed gate: {0}")]
+    InvalidCondensedGate(String),
+    /// An input of the contact model lies outside its domain.
+    #[error("contact input `{name}` = {value} is outside [{lo}, {hi}]")]
+    ContactDomain {
+        /// Input name.
+        name: &'static str,
+        /// Offending value.
+        value: f64,
+        /// Lower bound.
+        lo: f64,
+        /// Upper bound (exclusive for the gap length).
+        hi: f64,
+    },
+    /// A slice passed to the contact model had the wrong length.
+    #[error("{what}: expected length {expected}, got {got}")]
+    ContactDimension {
+        /// Which argument.
+        what: &'static str,
+        /// Required length.
+        expected: usize,
+        /// Length received.
+        got: usize,
+    },
+    /// A matrix that must be symmetric positive definite is not.
+    #[error("{what} is not positive definite")]
+    ContactNotPositiveDefinite {
+        /// Which matrix.
+        what: &'static str,
+    },
+    /// An iterative contact solve hit its iteration cap.
+    #[error(
+        "contact solve did not converge in the {stage} after {iterations} iterations (residual {residual:e})"
+    )]
+    ContactNotConverged {
+        /// Which loop.
+        stage: &'static str,
+        /// Iterations performed.
+        iterations: usize,
+        /// Last residual (relative tangential-law residual, or number of active-set changes).
+        residual: f64,
+    },
+    /// A synthetic-data scenario is invalid.
+    #[error("invalid scenario parameter `{name}`: {reason}")]
+    InvalidScenario {
+        /// Parameter name.
+        name: &'static str,
+        /// Why it is invalid.
+        reason: String,
     },
 }
 

@@ -125,6 +125,13 @@ pub trait UnobservableModel: Send + Sync {
     /// Evaluates `g_u(x, d_u, θ)` into `out` (length `C * N_u`, component blocked).
     fn evaluate(&self, x: &[f64], theta: &[f64], out: &mut [f64]) -> Result<()>;
 
+    /// Checks that the inputs `x` lie in the model's domain (e.g. `h_up >= h_down` for the
+    /// gate). Module 2 uses it to draw training inputs only where the model is defined; the
+    /// default accepts every `x`.
+    fn check_input(&self, x: &[f64]) -> Result<()> {
+        check_len("x", x, self.input_dim())
+    }
+
     /// Number of inputs `x`.
     fn input_dim(&self) -> usize {
         self.input_names().len()
@@ -273,7 +280,9 @@ impl Prior for UniformPrior {
             .map(|&(lo, hi)| {
                 let (x, w) = orthopoly::gauss_legendre(order, lo, hi)?;
                 let total = hi - lo;
-                Ok(x.into_iter().zip(w.into_iter().map(|w| w / total)).collect())
+                Ok(x.into_iter()
+                    .zip(w.into_iter().map(|w| w / total))
+                    .collect())
             })
             .collect::<Result<Vec<Vec<(f64, f64)>>>>()?;
         Ok(tensor_product(&per_dim))
@@ -434,7 +443,10 @@ impl DiscrepancyBasis {
         let max_terms = *terms.iter().max().unwrap_or(&1);
         let basis = Basis::new(family, interval.0, interval.1, max_terms)?;
         let full = basis.matrix(points)?;
-        let matrices = terms.iter().map(|&k| full.columns(0, k).into_owned()).collect();
+        let matrices = terms
+            .iter()
+            .map(|&k| full.columns(0, k).into_owned())
+            .collect();
         Ok(Self {
             family,
             interval,
@@ -498,12 +510,10 @@ impl DiscrepancyBasis {
         for (c, l) in self.matrices.iter().enumerate() {
             let rhs = nalgebra::DVector::from_column_slice(&y[c * n..(c + 1) * n]);
             let svd = l.clone().svd(true, true);
-            let sol = svd
-                .solve(&rhs, 1e-12)
-                .map_err(|e| ModelError::Numerical {
-                    context: "DiscrepancyBasis::project".into(),
-                    reason: e.to_string(),
-                })?;
+            let sol = svd.solve(&rhs, 1e-12).map_err(|e| ModelError::Numerical {
+                context: "DiscrepancyBasis::project".into(),
+                reason: e.to_string(),
+            })?;
             alpha.extend(sol.iter());
         }
         Ok(alpha)

@@ -2,3 +2,4 @@ pub mod common;
 mod config;
 mod element;
 mod gate;
+mod inp;

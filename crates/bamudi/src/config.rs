@@ -1,0 +1,473 @@
+//! The validated calibration configuration (TOML/serde) with chained setters.
+
+use crate::error::{BamudiError, Result};
+use serde::{Deserialize, Serialize};
+
+/// How the discrepancy coefficients `α` and the regression coefficient `ρ` of the Module-2
+/// training set (Eq. 27) are drawn. It is fixed in advance from the model alone, never tuned
+/// against a known truth:
+///
+/// * `ρ ~ U(rho_range)`; the default `[0, 1.2]` covers the Eq.-30 search range `[0, 1]` with a
+///   margin, so that the estimator is not extrapolating at the edges of the search.
+/// * `x ~ U(x_bounds)` (per input; default: the bounding box of the experiment inputs, which are
+///   controlled, known quantities).
+/// * `α_k ~ U(-c s_k(x), c s_k(x))` independently, where `s_k(x)` is the magnitude of the
+///   `k`-th coefficient of the least-squares projection (onto the discrepancy basis) of the
+///   nominal response `g_u(x, θ̄)` at the prior mean `θ̄`, plus a floor
+///   `floor_fraction * max_j |coef_j|` over the coefficients `j` of the same component, so that
+///   coefficients the nominal shape happens not to excite still get a range. `c` is
+///   [`alpha_scale`](Self::alpha_scale).
+/// * `draws_per_x` `(ρ, α)` draws share one `x`, so each `g_u(x, θ_j)` evaluation (at every
+///   quadrature node `θ_j`) is reused `draws_per_x` times: a training set of `N_t` samples needs
+///   `N_t / draws_per_x` distinct `x` values ("the pool") and `pool * n_nodes` `g_u` calls.
+/// * `noise_sd`: standard deviation of Gaussian noise added to the training outputs `μ_o`
+///   (Eq. 27 has none; default 0).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SamplingRule {
+    /// Range of `ρ`.
+    pub rho_range: (f64, f64),
+    /// The constant `c` of the `α` range.
+    pub alpha_scale: f64,
+    /// Floor of `s_k(x)` as a fraction of the component's largest nominal coefficient.
+    pub floor_fraction: f64,
+    /// `(ρ, α)` draws per distinct `x`.
+    pub draws_per_x: usize,
+    /// Explicit input bounds (default: the experiments' bounding box).
+    pub x_bounds: Option<Vec<(f64, f64)>>,
+    /// Noise added to the training outputs (output units, e.g. microstrain).
+    pub noise_sd: f64,
+}
+
+impl Default for SamplingRule {
+    fn default() -> Self {
+        Self {
+            rho_range: (0.0, 1.2),
+            alpha_scale: 0.5,
+            floor_fraction: 0.05,
+            draws_per_x: 10,
+            x_bounds: None,
+            noise_sd: 0.0,
+        }
+    }
+}
+
+impl SamplingRule {
+    /// Sets the range of `ρ`.
+    ///
+    /// ```
+    /// let r = bamudi::SamplingRule::default().rho_range(0.0, 1.5);
+    /// assert_eq!(r.rho_range, (0.0, 1.5));
+    /// ```
+    pub fn rho_range(mut self, lo: f64, hi: f64) -> Self {
+        self.rho_range = (lo, hi);
+        self
+    }
+    /// Sets `c`.
+    ///
+    /// ```
+    /// assert_eq!(bamudi::SamplingRule::default().alpha_scale(1.0).alpha_scale, 1.0);
+    /// ```
+    pub fn alpha_scale(mut self, c: f64) -> Self {
+        self.alpha_scale = c;
+        self
+    }
+    /// Sets the floor fraction.
+    ///
+    /// ```
+    /// assert_eq!(bamudi::SamplingRule::default().floor_fraction(0.1).floor_fraction, 0.1);
+    /// ```
+    pub fn floor_fraction(mut self, f: f64) -> Self {
+        self.floor_fraction = f;
+        self
+    }
+    /// Sets the number of draws per distinct `x`.
+    ///
+    /// ```
+    /// assert_eq!(bamudi::SamplingRule::default().draws_per_x(5).draws_per_x, 5);
+    /// ```
+    pub fn draws_per_x(mut self, n: usize) -> Self {
+        self.draws_per_x = n;
+        self
+    }
+    /// Sets explicit input bounds.
+    ///
+    /// ```
+    /// let r = bamudi::SamplingRule::default().x_bounds(vec![(0.0, 1.0)]);
+    /// assert!(r.x_bounds.is_some());
+    /// ```
+    pub fn x_bounds(mut self, b: Vec<(f64, f64)>) -> Self {
+        self.x_bounds = Some(b);
+        self
+    }
+    /// Sets the training-output noise.
+    ///
+    /// ```
+    /// assert_eq!(bamudi::SamplingRule::default().noise_sd(0.5).noise_sd, 0.5);
+    /// ```
+    pub fn noise_sd(mut self, s: f64) -> Self {
+        self.noise_sd = s;
+        self
+    }
+
+    /// Checks the values.
+    ///
+    /// ```
+    /// assert!(bamudi::SamplingRule::default().validate().is_ok());
+    /// assert!(bamudi::SamplingRule::default().alpha_scale(-1.0).validate().is_err());
+    /// ```
+    pub fn validate(&self) -> Result<()> {
+        let (lo, hi) = self.rho_range;
+        if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+            return Err(BamudiError::config(
+                "sampling.rho_range",
+                format!("need lo < hi, got [{lo}, {hi}]"),
+            ));
+        }
+        if !(self.alpha_scale.is_finite() && self.alpha_scale > 0.0) {
+            return Err(BamudiError::config("sampling.alpha_scale", "must be > 0"));
+        }
+        if !(self.floor_fraction.is_finite() && self.floor_fraction >= 0.0) {
+            return Err(BamudiError::config(
+                "sampling.floor_fraction",
+                "must be >= 0",
+            ));
+        }
+        if self.draws_per_x == 0 {
+            return Err(BamudiError::config("sampling.draws_per_x", "must be >= 1"));
+        }
+        if !(self.noise_sd.is_finite() && self.noise_sd >= 0.0) {
+            return Err(BamudiError::config("sampling.noise_sd", "must be >= 0"));
+        }
+        if let Some(b) = &self.x_bounds
+            && b.iter()
+                .any(|&(lo, hi)| !(lo.is_finite() && hi.is_finite() && lo < hi))
+        {
+            return Err(BamudiError::config(
+                "sampling.x_bounds",
+                "each interval needs lo < hi",
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// How `θ` is marginalised over its prior in Eq. 25/27.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Marginalisation {
+    /// Gauss quadrature of the prior ([`mlmodel::Prior::quadrature`]) with `order` nodes per dimension.
+    Quadrature {
+        /// Nodes per dimension.
+        order: usize,
+    },
+    /// Monte Carlo over `samples` prior draws (the paper's choice).
+    MonteCarlo {
+        /// Number of prior draws.
+        samples: usize,
+    },
+}
+
+impl Default for Marginalisation {
+    fn default() -> Self {
+        Self::Quadrature { order: 5 }
+    }
+}
+
+/// The estimator `α = f_ML(ρ, x, y)` of Eq. 29.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum EstimatorConfig {
+    /// The paper's LSTM (`seqnet`); the inputs `[ρ, x, y]` (standardised) are fed as a sequence
+    /// of `steps` steps.
+    Lstm {
+        /// Hidden units.
+        hidden: usize,
+        /// Stacked LSTM layers.
+        layers: usize,
+        /// Sequence length.
+        steps: usize,
+        /// Maximum epochs.
+        epochs: usize,
+        /// Mini-batch size.
+        batch_size: usize,
+        /// Adam learning rate.
+        learning_rate: f64,
+        /// Fraction of the training set held out for early stopping.
+        validation_fraction: f64,
+        /// Early-stopping patience (epochs).
+        patience: usize,
+    },
+    /// A `smartcore` ridge regression on quadratic features of the standardised `[ρ, x, y]`
+    /// (one model per coefficient).
+    Ridge {
+        /// Ridge penalty on the standardised features.
+        lambda: f64,
+    },
+    /// The exact linear-Gaussian conditional mean (needs a linear `g_o`).
+    ExactLinear,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        Self::Lstm {
+            hidden: 64,
+            layers: 1,
+            steps: 10,
+            epochs: 200,
+            batch_size: 256,
+            learning_rate: 1e-3,
+            validation_fraction: 0.1,
+            patience: 20,
+        }
+    }
+}
+
+/// The `ρ` search of Eq. 30: a grid over `[lo, hi]` refined by Brent's method.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RhoSearch {
+    /// Lower end.
+    pub lo: f64,
+    /// Upper end.
+    pub hi: f64,
+    /// Grid points.
+    pub points: usize,
+    /// Refine the best grid point with Brent's method.
+    pub refine: bool,
+}
+
+impl Default for RhoSearch {
+    fn default() -> Self {
+        Self {
+            lo: 0.0,
+            hi: 1.0,
+            points: 101,
+            refine: true,
+        }
+    }
+}
+
+/// Settings of the adaptive random-walk Metropolis sampler (used when `dim θ > 1`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct McmcConfig {
+    /// Independent chains.
+    pub chains: usize,
+    /// Warm-up (adaptation) iterations per chain, discarded.
+    pub warmup: usize,
+    /// Kept iterations per chain.
+    pub samples: usize,
+}
+
+impl Default for McmcConfig {
+    fn default() -> Self {
+        Self {
+            chains: 4,
+            warmup: 2000,
+            samples: 5000,
+        }
+    }
+}
+
+/// Everything `calibrate` needs besides the model and the data.
+///
+/// ```
+/// use bamudi::{CalibrationConfig, EstimatorConfig};
+/// let cfg = CalibrationConfig::default()
+///     .estimator(EstimatorConfig::ExactLinear)
+///     .training_size(3000)
+///     .sigma_eps(Some(1.0))
+///     .seed(7);
+/// cfg.validate().unwrap();
+/// let text = toml::to_string(&cfg).unwrap();
+/// let back: CalibrationConfig = toml::from_str(&text).unwrap();
+/// assert_eq!(back, cfg);
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibrationConfig {
+    /// The coefficient estimator of Eq. 29.
+    pub estimator: EstimatorConfig,
+    /// The training-set sampling rule.
+    pub sampling: SamplingRule,
+    /// Training-set size `N_t` (paper: 50,000).
+    pub training_size: usize,
+    /// Marginalisation of `θ` in Eq. 25/27/31.
+    pub marginalisation: Marginalisation,
+    /// The `ρ` search.
+    pub rho: RhoSearch,
+    /// Grid points for the one-dimensional `θ` posterior.
+    pub theta_grid_points: usize,
+    /// Random restarts of each GP hyper-parameter fit.
+    pub gp_restarts: usize,
+    /// Measurement-noise standard deviation `σ_ε` (output units); `None`: estimated.
+    pub sigma_eps: Option<f64>,
+    /// MCMC settings (for `dim θ > 1`).
+    pub mcmc: McmcConfig,
+    /// Master seed; every random step derives its seed from it.
+    pub seed: u64,
+    /// Worker threads (`None`: rayon's default). Applied by the CLI to the global pool.
+    pub threads: Option<usize>,
+    /// Show progress bars (also suppressed when `CI` is set or stderr is not a terminal).
+    pub progress: bool,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self {
+            estimator: EstimatorConfig::default(),
+            sampling: SamplingRule::default(),
+            training_size: 50_000,
+            marginalisation: Marginalisation::default(),
+            rho: RhoSearch::default(),
+            theta_grid_points: 201,
+            gp_restarts: 3,
+            sigma_eps: None,
+            mcmc: McmcConfig::default(),
+            seed: 2021,
+            threads: None,
+            progress: true,
+        }
+    }
+}
+
+macro_rules! setter {
+    ($(#[$doc:meta])* $name:ident : $ty:ty, $example:expr) => {
+        $(#[$doc])*
+        ///
+        /// ```
+        #[doc = concat!("let cfg = bamudi::CalibrationConfig::default().", stringify!($name), "(", $example, ");")]
+        /// assert!(cfg.validate().is_ok());
+        /// ```
+        pub fn $name(mut self, v: $ty) -> Self {
+            self.$name = v;
+            self
+        }
+    };
+}
+
+impl CalibrationConfig {
+    setter!(/// Sets the estimator.
+        estimator: EstimatorConfig, "bamudi::EstimatorConfig::ExactLinear");
+    setter!(/// Sets the sampling rule.
+        sampling: SamplingRule, "bamudi::SamplingRule::default()");
+    setter!(/// Sets the training-set size.
+        training_size: usize, "3000");
+    setter!(/// Sets the marginalisation method.
+        marginalisation: Marginalisation, "bamudi::Marginalisation::MonteCarlo { samples: 100 }");
+    setter!(/// Sets the `ρ` search.
+        rho: RhoSearch, "bamudi::RhoSearch::default()");
+    setter!(/// Sets the number of `θ` grid points.
+        theta_grid_points: usize, "101");
+    setter!(/// Sets GP restarts.
+        gp_restarts: usize, "2");
+    setter!(/// Sets (or clears) `σ_ε`.
+        sigma_eps: Option<f64>, "Some(1.0)");
+    setter!(/// Sets the MCMC settings.
+        mcmc: McmcConfig, "bamudi::McmcConfig::default()");
+    setter!(/// Sets the master seed.
+        seed: u64, "42");
+    setter!(/// Sets the thread count.
+        threads: Option<usize>, "Some(2)");
+    setter!(/// Enables or disables progress bars.
+        progress: bool, "false");
+
+    /// Parses and validates a TOML configuration (missing keys take their defaults).
+    ///
+    /// ```
+    /// let cfg = bamudi::CalibrationConfig::from_toml_str("training_size = 1000\n[estimator]\nkind = \"exact_linear\"\n").unwrap();
+    /// assert_eq!(cfg.training_size, 1000);
+    /// assert!(bamudi::CalibrationConfig::from_toml_str("training_size = 0").is_err());
+    /// ```
+    pub fn from_toml_str(text: &str) -> Result<Self> {
+        let cfg: Self = toml::from_str(text).map_err(|e| BamudiError::Serde {
+            context: "calibration config (TOML)".into(),
+            reason: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// Checks every field; the error names the TOML key.
+    ///
+    /// ```
+    /// assert!(bamudi::CalibrationConfig::default().validate().is_ok());
+    /// assert!(bamudi::CalibrationConfig::default().sigma_eps(Some(-1.0)).validate().is_err());
+    /// ```
+    pub fn validate(&self) -> Result<()> {
+        self.sampling.validate()?;
+        if self.training_size < 10 {
+            return Err(BamudiError::config("training_size", "must be >= 10"));
+        }
+        match self.marginalisation {
+            Marginalisation::Quadrature { order: 0 } => {
+                return Err(BamudiError::config("marginalisation.order", "must be >= 1"));
+            }
+            Marginalisation::MonteCarlo { samples: 0 } => {
+                return Err(BamudiError::config(
+                    "marginalisation.samples",
+                    "must be >= 1",
+                ));
+            }
+            _ => {}
+        }
+        let r = &self.rho;
+        if !(r.lo.is_finite() && r.hi.is_finite() && r.lo < r.hi) || r.points < 3 {
+            return Err(BamudiError::config("rho", "need lo < hi and points >= 3"));
+        }
+        if self.theta_grid_points < 3 {
+            return Err(BamudiError::config("theta_grid_points", "must be >= 3"));
+        }
+        if let Some(s) = self.sigma_eps
+            && !(s.is_finite() && s > 0.0)
+        {
+            return Err(BamudiError::config(
+                "sigma_eps",
+                format!("must be > 0, got {s}"),
+            ));
+        }
+        if self.mcmc.chains < 2 || self.mcmc.samples < 10 {
+            return Err(BamudiError::config(
+                "mcmc",
+                "need chains >= 2 (for R-hat) and samples >= 10",
+            ));
+        }
+        if self.threads == Some(0) {
+            return Err(BamudiError::config("threads", "must be >= 1"));
+        }
+        match &self.estimator {
+            EstimatorConfig::Lstm {
+                hidden,
+                steps,
+                epochs,
+                batch_size,
+                learning_rate,
+                validation_fraction,
+                ..
+            } => {
+                if *hidden == 0 || *steps == 0 || *epochs == 0 || *batch_size == 0 {
+                    return Err(BamudiError::config(
+                        "estimator",
+                        "hidden, steps, epochs, batch_size must be >= 1",
+                    ));
+                }
+                if learning_rate.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+                    || !(0.0..1.0).contains(validation_fraction)
+                {
+                    return Err(BamudiError::config(
+                        "estimator",
+                        "need learning_rate > 0 and 0 <= validation_fraction < 1",
+                    ));
+                }
+            }
+            EstimatorConfig::Ridge { lambda } => {
+                if !(lambda.is_finite() && *lambda >= 0.0) {
+                    return Err(BamudiError::config("estimator.lambda", "must be >= 0"));
+                }
+            }
+            EstimatorConfig::ExactLinear => {}
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,132 @@
+//! The crate's single error type.
+
+/// Errors from calibration, I/O and reporting.
+#[derive(Debug, thiserror::Error)]
+pub enum BamudiError {
+    /// A configuration value is invalid.
+    #[error("invalid configuration `{name}`: {reason}")]
+    InvalidConfig {
+        /// Parameter name (TOML key).
+        name: &'static str,
+        /// Why it is invalid.
+        reason: String,
+    },
+    /// Arrays passed together have inconsistent sizes.
+    #[error("dimension mismatch in {what}: expected {expected}, got {got}")]
+    Dimension {
+        /// What was compared.
+        what: String,
+        /// Expected size.
+        expected: usize,
+        /// Size received.
+        got: usize,
+    },
+    /// A CSV file is malformed; `row` is 1-based counting the header as row 1.
+    #[error("{file}: row {row}, column `{column}`: {reason}")]
+    Csv {
+        /// File path.
+        file: String,
+        /// 1-based row (the header is row 1); 0 when the problem is not tied to a row.
+        row: usize,
+        /// Column name (or `-`).
+        column: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// File-system error with the path.
+    #[error("{path}: {source}")]
+    Io {
+        /// Offending path.
+        path: String,
+        /// Underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// (De)serialisation error with the path or context.
+    #[error("{context}: {reason}")]
+    Serde {
+        /// File or artefact.
+        context: String,
+        /// Parser message.
+        reason: String,
+    },
+    /// A covariance matrix that must be positive definite is not.
+    #[error("{what} is not positive definite (Cholesky failed)")]
+    NotPositiveDefinite {
+        /// Which matrix.
+        what: String,
+    },
+    /// A numerical step failed.
+    #[error("numerical failure in {context}: {reason}")]
+    Numerical {
+        /// Where.
+        context: String,
+        /// What.
+        reason: String,
+    },
+    /// The posterior has no mass on the grid / chain (all log densities -inf or NaN).
+    #[error("degenerate posterior: {0}")]
+    DegeneratePosterior(String),
+    /// A model evaluation failed.
+    #[error(transparent)]
+    Model(#[from] mlmodel::ModelError),
+    /// Gaussian-process fitting or prediction failed.
+    #[error("Gaussian process for coefficient {coefficient}: {reason}")]
+    Gp {
+        /// Index of the coefficient whose GP failed.
+        coefficient: usize,
+        /// The GP error message.
+        reason: String,
+    },
+    /// The coefficient estimator (LSTM, smartcore) failed.
+    #[error("coefficient estimator `{estimator}`: {reason}")]
+    Estimator {
+        /// Estimator name.
+        estimator: &'static str,
+        /// Message.
+        reason: String,
+    },
+    /// Not enough data rows for a step (e.g. the close-the-loop split).
+    #[error("too few rows for {what}: got {got}")]
+    TooFewRows {
+        /// What needs the rows.
+        what: String,
+        /// Rows available.
+        got: usize,
+    },
+    /// A calibration (through the close-the-loop `Calibrator` interface) failed.
+    #[error("calibration failed: {0}")]
+    Calibration(String),
+    /// The application model (e.g. the miter gate) failed to build or evaluate.
+    #[error("application model: {0}")]
+    Application(String),
+    /// Plotting failed.
+    #[error("plot {file}: {reason}")]
+    Plot {
+        /// SVG file.
+        file: String,
+        /// Message.
+        reason: String,
+    },
+}
+
+/// Result alias.
+pub type Result<T> = std::result::Result<T, BamudiError>;
+
+impl BamudiError {
+    /// Shorthand for [`BamudiError::InvalidConfig`].
+    pub(crate) fn config(name: &'static str, reason: impl Into<String>) -> Self {
+        Self::InvalidConfig {
+            name,
+            reason: reason.into(),
+        }
+    }
+    /// Shorthand for [`BamudiError::Dimension`].
+    pub(crate) fn dim(what: impl Into<String>, expected: usize, got: usize) -> Self {
+        Self::Dimension {
+            what: what.into(),
+            expected,
+            got,
+        }
+    }
+}

@@ -1,0 +1,406 @@
+//! Integration tests of the `bamudi` building blocks (the full pipeline on the beam
+//! application lives in the workspace e2e tests, `tests/tests/lib.rs`).
+
+#[path = "../../mlmodel/tests/apps/beam_app.rs"]
+mod beam_app;
+mod cli;
+mod closeloop;
+
+use bamudi::estimator::{CoefficientEstimator, ExactLinearEstimator};
+use bamudi::likelihood::{FactoredCovariance, assemble_covariance, iid_log_density};
+use bamudi::mcmc::adaptive_metropolis;
+use bamudi::posterior::GridPosterior;
+use bamudi::training::{self, LinearParts, XContext};
+use bamudi::{CalibrationConfig, Experiments, Marginalisation, McmcConfig, SamplingRule};
+use faer::Par;
+use nalgebra::{DMatrix, DVector};
+use proptest::prelude::*;
+
+/// A small deterministic pseudo-random matrix (entries in [-1, 1)).
+fn pseudo_random(rows: usize, cols: usize, seed: u64) -> DMatrix<f64> {
+    let mut g = beam_app::Normal64::new(seed);
+    DMatrix::from_fn(rows, cols, |_, _| 2.0 * g.uniform() - 1.0)
+}
+
+fn spd(n: usize, seed: u64) -> DMatrix<f64> {
+    let m = pseudo_random(n, n, seed);
+    &m * m.transpose() + DMatrix::identity(n, n) * 0.1
+}
+
+fn kron(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    DMatrix::from_fn(a.nrows() * b.nrows(), a.ncols() * b.ncols(), |r, c| {
+        a[(r / b.nrows(), c / b.ncols())] * b[(r % b.nrows(), c % b.ncols())]
+    })
+}
+
+#[test]
+fn module3_likelihood_equals_brute_force_dense_evaluation() {
+    let (n_e, n_o, k) = (4, 3, 2);
+    let b = pseudo_random(n_o, k, 1);
+    let covs: Vec<DMatrix<f64>> = (0..k).map(|kk| spd(n_e, 10 + kk as u64)).collect();
+    let sigma2 = 0.5;
+    // brute force: explicit Kronecker sum, LU inverse and determinant (a different algorithm)
+    let mut v = DMatrix::identity(n_e * n_o, n_e * n_o) * sigma2;
+    for kk in 0..k {
+        let bk = b.column(kk).into_owned();
+        v += kron(&covs[kk], &(&bk * bk.transpose()));
+    }
+    let r = DVector::from_iterator(n_e * n_o, pseudo_random(n_e * n_o, 1, 99).iter().copied());
+    let inv = v.clone().try_inverse().unwrap();
+    let det = v.clone().determinant();
+    let n_s = (n_e * n_o) as f64;
+    let brute = -0.5 * (r.transpose() * &inv * &r)[(0, 0)]
+        - 0.5 * det.ln()
+        - 0.5 * n_s * (2.0 * std::f64::consts::PI).ln();
+    let fac =
+        FactoredCovariance::new(assemble_covariance(&b, &covs, sigma2).unwrap(), "test").unwrap();
+    let ours = fac.log_density(r.as_slice(), Par::Seq).unwrap();
+    // 12x12 well-conditioned (eigenvalues >= 0.5): round-off of two O(n^3) algorithms only
+    assert!(
+        (ours - brute).abs() < 1e-9 * brute.abs().max(1.0),
+        "{ours} vs {brute}"
+    );
+    assert_eq!(fac.report().jitter, 0.0);
+}
+
+#[test]
+fn iid_likelihood_is_the_product_of_normals() {
+    let r = [0.3, -1.2, 2.0];
+    let s2 = 0.7f64;
+    let direct: f64 = r
+        .iter()
+        .map(|x| -0.5 * x * x / s2 - 0.5 * (2.0 * std::f64::consts::PI * s2).ln())
+        .sum();
+    // same formula, summed differently: round-off only
+    assert!((iid_log_density(&r, s2) - direct).abs() < 1e-12);
+}
+
+#[test]
+fn covariance_shape_mismatch_is_an_error() {
+    let b = DMatrix::zeros(3, 2);
+    let covs = vec![DMatrix::identity(4, 4)];
+    assert!(assemble_covariance(&b, &covs, 1.0).is_err());
+    // indefinite (eigenvalues 3 and -1): no small jitter can rescue it, so it is an error
+    let err = FactoredCovariance::new(
+        faer::Mat::from_fn(2, 2, |i, j| if i == j { 1.0 } else { 2.0 }),
+        "V",
+    )
+    .unwrap_err();
+    assert!(
+        err.to_string().contains("V is not positive definite"),
+        "{err}"
+    );
+}
+
+#[test]
+fn grid_posterior_integrates_to_one_and_matches_a_skewed_density() {
+    // Gamma(3, 1) density on [0, 30]: mean 3, var 3
+    let theta: Vec<f64> = (0..3001).map(|i| 30.0 * i as f64 / 3000.0).collect();
+    let logp: Vec<f64> = theta
+        .iter()
+        .map(|&t| {
+            if t > 0.0 {
+                2.0 * t.ln() - t
+            } else {
+                f64::NEG_INFINITY
+            }
+        })
+        .collect();
+    let post = GridPosterior::new(theta.clone(), logp).unwrap();
+    let h = 0.01;
+    let integral: f64 =
+        h * (post.density.iter().sum::<f64>() - 0.5 * (post.density[0] + post.density[3000]));
+    // trapezoid normalisation makes this exact up to round-off
+    assert!((integral - 1.0).abs() < 1e-12);
+    assert!((post.cdf[3000] - 1.0).abs() < 1e-12);
+    // trapezoid error O(h²) = 1e-4 times derivative bounds of order 1
+    assert!((post.mean - 3.0).abs() < 1e-3);
+    assert!((post.sd - 3f64.sqrt()).abs() < 1e-3);
+    // Gamma(3,1) quantiles: 0.6187 and 7.2247; interpolation error O(h)
+    assert!(
+        (post.ci95.0 - 0.6187).abs() < 0.01 && (post.ci95.1 - 7.2247).abs() < 0.01,
+        "{:?}",
+        post.ci95
+    );
+    let masses: f64 = post.masses().iter().sum();
+    assert!((masses - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn grid_posterior_rejects_all_zero_density() {
+    let err = GridPosterior::new(vec![0.0, 1.0, 2.0], vec![f64::NEG_INFINITY; 3]).unwrap_err();
+    assert!(err.to_string().contains("degenerate"));
+}
+
+#[test]
+fn mcmc_recovers_a_correlated_2d_gaussian() {
+    let mean = [1.0, -2.0];
+    let cov = DMatrix::from_row_slice(2, 2, &[1.0, 0.8, 0.8, 2.0]);
+    let prec = cov.clone().try_inverse().unwrap();
+    let logp = |t: &[f64]| {
+        let d = DVector::from_vec(vec![t[0] - mean[0], t[1] - mean[1]]);
+        -0.5 * (d.transpose() * &prec * &d)[(0, 0)]
+    };
+    let cfg = McmcConfig {
+        chains: 4,
+        warmup: 3000,
+        samples: 20_000,
+    };
+    let starts = vec![
+        vec![-3.0, 3.0],
+        vec![4.0, -5.0],
+        vec![0.0, 0.0],
+        vec![3.0, 1.0],
+    ];
+    let res = adaptive_metropolis(logp, &starts, &[0.5, 0.5], &cfg, 11).unwrap();
+    let ess = res.ess.iter().copied().fold(f64::INFINITY, f64::min);
+    // Monte Carlo standard error of a mean is sd / sqrt(ESS); allow 4 standard errors
+    for j in 0..2 {
+        let se = cov[(j, j)].sqrt() / ess.sqrt();
+        assert!(
+            (res.mean[j] - mean[j]).abs() < 4.0 * se,
+            "mean {j}: {} (se {se})",
+            res.mean[j]
+        );
+    }
+    // covariance entries: relative MC error ~ sqrt(2/ESS) ≈ 0.03 for ESS ~ 2000; allow 0.15
+    for (a, b) in [(0, 0), (0, 1), (1, 1)] {
+        assert!(
+            (res.cov[(a, b)] - cov[(a, b)]).abs() < 0.15 * cov[(a, a)].max(cov[(b, b)]),
+            "cov {a}{b}: {}",
+            res.cov[(a, b)]
+        );
+    }
+    assert!(res.rhat.iter().all(|r| *r < 1.01), "rhat {:?}", res.rhat);
+    assert!(ess > 1000.0, "ess {ess}");
+    // adapted random-walk acceptance in 2-D should be near the optimal ~0.35
+    assert!(
+        res.acceptance.iter().all(|a| (0.15..0.6).contains(a)),
+        "{:?}",
+        res.acceptance
+    );
+}
+
+#[test]
+fn mcmc_is_reproducible_from_its_seed() {
+    let cfg = McmcConfig {
+        chains: 2,
+        warmup: 200,
+        samples: 300,
+    };
+    let starts = vec![vec![0.0, 0.0], vec![1.0, 1.0]];
+    let f = |t: &[f64]| -0.5 * (t[0] * t[0] + t[1] * t[1]);
+    let a = adaptive_metropolis(f, &starts, &[1.0, 1.0], &cfg, 5).unwrap();
+    let b = adaptive_metropolis(f, &starts, &[1.0, 1.0], &cfg, 5).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn exact_estimator_equals_brute_force_gaussian_conditioning() {
+    let (n_o, k) = (5, 3);
+    let b = pseudo_random(n_o, k, 3);
+    let est = ExactLinearEstimator::new(b.clone(), 0.4).unwrap();
+    let m = DVector::from_vec(vec![0.5, -1.0, 0.2]);
+    let cov = spd(k, 4);
+    let r = DVector::from_vec(vec![1.0, -0.5, 0.3, 2.0, -1.0]);
+    // joint Gaussian of (α, y = B α + ε): E[α | y] = m + Σ_αy Σ_yy⁻¹ (y - B m), via a full inverse
+    let s_yy = &b * &cov * b.transpose() + DMatrix::identity(n_o, n_o) * 0.16;
+    let s_ay = &cov * b.transpose();
+    let brute = &m + s_ay * s_yy.try_inverse().unwrap() * (&r - &b * &m);
+    let ours = est.conditional_mean(&m, &cov, &r).unwrap();
+    // same maths via SVD pseudo-inverse vs LU inverse of a 5x5 SPD matrix: round-off only
+    assert!((&ours - &brute).amax() < 1e-10, "{ours} vs {brute}");
+
+    // and against Monte Carlo: self-normalised importance sampling over prior draws, for data
+    // drawn from the model itself (so the posterior is not in a prior tail)
+    let chol = cov.clone().cholesky().unwrap().l();
+    let alpha0 = &m + &chol * DVector::from_vec(vec![0.5, -0.3, 0.2]);
+    let r = &b * &alpha0 + DVector::from_vec(vec![0.2, -0.4, 0.1, 0.3, -0.2]);
+    let exact = est.conditional_mean(&m, &cov, &r).unwrap();
+    let post_cov = &cov - &cov * b.transpose() * s_yy_inv(&b, &cov, 0.16) * &b * &cov;
+    let mut g = beam_app::Normal64::new(77);
+    let (mut num, mut den, mut den2) = (DVector::zeros(k), 0.0, 0.0);
+    for _ in 0..200_000 {
+        let a = &m + &chol * DVector::from_fn(k, |_, _| g.normal());
+        let w = (-0.5 * (&r - &b * &a).norm_squared() / 0.16).exp();
+        num += &a * w;
+        den += w;
+        den2 += w * w;
+    }
+    let mc = num / den;
+    let ess = den * den / den2;
+    for j in 0..k {
+        // importance-sampling standard error ≈ posterior sd / sqrt(ESS); allow 5 of them
+        let tol = 5.0 * post_cov[(j, j)].sqrt() / ess.sqrt();
+        assert!(
+            (mc[j] - exact[j]).abs() < tol,
+            "coef {j}: MC {} vs exact {} (tol {tol}, ESS {ess})",
+            mc[j],
+            exact[j]
+        );
+    }
+}
+
+fn s_yy_inv(b: &DMatrix<f64>, cov: &DMatrix<f64>, noise_var: f64) -> DMatrix<f64> {
+    (b * cov * b.transpose() + DMatrix::identity(b.nrows(), b.nrows()) * noise_var)
+        .try_inverse()
+        .unwrap()
+}
+
+#[test]
+fn exact_estimator_without_noise_is_least_squares_when_b_has_full_column_rank() {
+    let b = pseudo_random(7, 4, 8);
+    let est = ExactLinearEstimator::new(b.clone(), 0.0).unwrap();
+    let ctx = vec![XContext {
+        mean_ag: vec![0.0; 7],
+        mean_offset: vec![1.0; 7],
+        alpha_half_width: vec![2.0, 0.5, 1.0, 3.0],
+    }];
+    let y = DMatrix::from_row_slice(1, 7, &[1.0, 2.0, 0.0, -1.0, 3.0, 0.5, 1.5]);
+    let got = est.predict(0.7, &DMatrix::zeros(1, 2), &y, &ctx).unwrap();
+    let rhs = DVector::from_iterator(7, y.iter().map(|v| v - 1.0));
+    let ls = (b.transpose() * &b).try_inverse().unwrap() * b.transpose() * rhs;
+    // pseudo-inverse limit equals the normal equations up to round-off (cond(B) is modest)
+    assert!((got.row(0).transpose() - ls).amax() < 1e-8);
+}
+
+fn write(name: &str, text: &str) -> std::path::PathBuf {
+    let p = std::env::temp_dir().join(format!("bamudi_test_{}_{name}", std::process::id()));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn csv_errors_name_file_row_and_column() {
+    let cases = [
+        (
+            "missing.csv",
+            "p,s\n1,2\n",
+            "row 1",
+            "`q`",
+            "missing column",
+        ),
+        ("dup.csv", "p,q,q,s\n1,2,3,4\n", "row 1", "`q`", "duplicate"),
+        (
+            "nan.csv",
+            "p,q,s\n1,2,3\n4,NaN,6\n",
+            "row 3",
+            "`q`",
+            "not finite",
+        ),
+        (
+            "text.csv",
+            "p,q,s\n1,2,3\n4,5,six\n",
+            "row 3",
+            "`s`",
+            "not a number",
+        ),
+        ("empty.csv", "p,q,s\n1,,3\n", "row 2", "`q`", "empty"),
+        ("short.csv", "p,q,s\n1,2\n", "row 2", "`s`", "fields"),
+    ];
+    for (name, text, row, col, what) in cases {
+        let path = write(name, text);
+        let err = Experiments::read_csv(&path, &["p", "q"], &["s"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(name) && err.contains(row) && err.contains(col) && err.contains(what),
+            "{name}: {err}"
+        );
+    }
+    let err = Experiments::read_csv(std::path::Path::new("/nonexistent/x.csv"), &["p"], &["s"])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("/nonexistent/x.csv"), "{err}");
+}
+
+#[test]
+fn csv_round_trip_is_exact_and_ignores_extra_columns() {
+    let x = pseudo_random(5, 2, 21);
+    let y = pseudo_random(5, 3, 22) * 1e3;
+    let e = Experiments::new(
+        vec!["a".into(), "b".into()],
+        vec!["u".into(), "v".into(), "w".into()],
+        x,
+        y,
+    )
+    .unwrap();
+    let path = std::env::temp_dir().join(format!("bamudi_test_{}_rt.csv", std::process::id()));
+    e.write_csv(&path).unwrap();
+    assert_eq!(
+        Experiments::read_csv(&path, &["a", "b"], &["u", "v", "w"]).unwrap(),
+        e
+    );
+    // a subset of columns in another order
+    let sub = Experiments::read_csv(&path, &["b"], &["w", "u"]).unwrap();
+    assert_eq!(sub.x.column(0), e.x.column(1));
+    assert_eq!(sub.y.column(0), e.y.column(2));
+}
+
+#[test]
+fn config_toml_round_trip_and_named_errors() {
+    let cfg = CalibrationConfig::default()
+        .marginalisation(Marginalisation::MonteCarlo { samples: 50 })
+        .sampling(SamplingRule::default().alpha_scale(0.8));
+    let text = toml::to_string(&cfg).unwrap();
+    assert_eq!(CalibrationConfig::from_toml_str(&text).unwrap(), cfg);
+    let err = CalibrationConfig::from_toml_str("[sampling]\nrho_range = [1.0, 0.0]\n")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("sampling.rho_range"), "{err}");
+    let err = CalibrationConfig::from_toml_str("trainin_size = 5\n")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("trainin_size"), "{err}");
+}
+
+#[test]
+fn training_set_linear_fast_path_equals_general_path_and_is_deterministic() {
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let parts = LinearParts::new(&model).unwrap();
+    let rule = training::theta_rule(
+        model.prior.as_ref(),
+        &Marginalisation::Quadrature { order: 3 },
+        0,
+    )
+    .unwrap();
+    let sampling = SamplingRule::default().draws_per_x(4);
+    let bounds = [beam_app::P_RANGE_LBF, beam_app::Q_RANGE_LBF_PER_IN];
+    let fast =
+        training::generate_linear(&model, &parts, &rule, &sampling, &bounds, 40, 9, false).unwrap();
+    let slow = training::generate_general(&model, &rule, &sampling, &bounds, 40, 9, false).unwrap();
+    assert_eq!(fast.len(), 40);
+    assert_eq!(fast.pool_size, 10);
+    assert_eq!(fast.alpha, slow.alpha);
+    assert_eq!(fast.x, slow.x);
+    let scale = fast.mu_o.amax();
+    // A (Σ w g) vs Σ w (A g): summation order only
+    assert!((&fast.mu_o - &slow.mu_o).amax() < 1e-9 * scale);
+    let again =
+        training::generate_linear(&model, &parts, &rule, &sampling, &bounds, 40, 9, false).unwrap();
+    assert_eq!(again.mu_o, fast.mu_o);
+    // the sampling rule: |α_k| within c (|s_k| + floor), ρ within its range
+    assert!(fast.rho.iter().all(|r| (0.0..=1.2).contains(r)));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, .. ProptestConfig::default() })]
+    /// The pseudo-inverse estimator reproduces α exactly from noise-free data whenever B has
+    /// full column rank (K <= N_o), for any ρ and offsets.
+    #[test]
+    fn exact_estimator_inverts_noise_free_data(seed in 0u64..1000, rho in 0.0..1.2f64) {
+        let b = pseudo_random(7, 3, seed);
+        let est = ExactLinearEstimator::new(b.clone(), 0.0).unwrap();
+        let alpha = pseudo_random(3, 1, seed + 1);
+        let ag: Vec<f64> = pseudo_random(7, 1, seed + 2).iter().copied().collect();
+        let off: Vec<f64> = pseudo_random(7, 1, seed + 3).iter().copied().collect();
+        let y: Vec<f64> = (0..7).map(|p| rho * ag[p] + off[p] + (b.row(p) * &alpha)[(0, 0)]).collect();
+        let ctx = vec![XContext { mean_ag: ag, mean_offset: off, alpha_half_width: vec![1.0; 3] }];
+        let got = est.predict(rho, &DMatrix::zeros(1, 2), &DMatrix::from_row_slice(1, 7, &y), &ctx).unwrap();
+        let cond = b.clone().svd(false, false).singular_values;
+        prop_assume!(cond.min() > 1e-3 * cond.max());
+        // conditioning-limited round-off
+        let err = (got.row(0).transpose() - &alpha).amax();
+        prop_assert!(err < 1e-8, "err {err}, singular values {cond}");
+    }
+}

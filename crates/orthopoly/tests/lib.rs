@@ -1,0 +1,2 @@
+//! Integration tests of `orthopoly` (one test binary; modules live in `tests/suite/`).
+mod suite;

@@ -1,0 +1,227 @@
+//! Workspace end-to-end tests: the whole BA-MUDI chain (Modules 2-4) on the beam-on-elastic-
+//! foundation application of `crates/mlmodel/tests/apps/beam_app.rs`, with a known truth
+//! `r_true = ρ g_u(x, θ*) + δ(x, d)`.
+
+#[path = "../../crates/mlmodel/tests/apps/beam_app.rs"]
+mod beam_app;
+
+use bamudi::{CalibrationConfig, EstimatorConfig, Experiments, calibrate};
+use beam_app::*;
+use mlmodel::{LinearObservableModel, UnobservableModel};
+
+const THETA_STAR_IN: f64 = 15.0;
+const RHO_TRUE: f64 = 0.8;
+const SIGMA_MICROSTRAIN: f64 = 1.0;
+const PRIOR_IN: (f64, f64) = (5.0, 25.0);
+const TERMS: usize = 4;
+
+fn experiments(n_e: usize, seed: u64) -> Experiments {
+    let (x, y) = simulate(n_e, THETA_STAR_IN, RHO_TRUE, SIGMA_MICROSTRAIN, seed);
+    let model = BeamReaction::new(41);
+    let outputs = (1..=7).map(|p| format!("gauge_{p}")).collect();
+    Experiments::new(model.input_names(), outputs, x, y).unwrap()
+}
+
+fn rms(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
+    (s / n as f64).sqrt()
+}
+
+/// `theta_tol`: `None` requires θ* inside the 95% interval; `Some(t)` only |mean − θ*| < t
+/// (for learnt estimators, whose approximation error in α̂ is not part of the Eq.-51 covariance
+/// beyond what the GP white noise absorbs, so the interval can be over-confident).
+fn check_calibration(
+    cal: &bamudi::Calibration,
+    model: &mlmodel::MultiLevelModel<BeamReaction, BeamStrain>,
+    rho_tol: f64,
+    theta_tol: Option<f64>,
+) {
+    let rho = cal.rho.rho_star;
+    if std::env::var_os("BAMUDI_DEBUG").is_some() {
+        for p in cal.rho.grid.iter().step_by(10) {
+            eprintln!(
+                "rho {:.2} J {:.3} S {:.3}",
+                p.rho, p.objective, p.sum_squares
+            );
+        }
+        eprintln!(
+            "post with {:?} {:?} without {:?} {:?}",
+            cal.posterior.mean(),
+            cal.posterior.ci95(),
+            cal.posterior_no_discrepancy.mean(),
+            cal.posterior_no_discrepancy.ci95()
+        );
+    }
+    // ρ is only identified up to the compensation between ρ, θ and δ (the paper finds 0.74
+    // and 0.83 for a true 0.8). Here Eq. 31 averages g_u over the wide prior of θ, which
+    // smears the reaction peak at the gap edge and pushes ρ* up (to the search bound 1.0 on
+    // this data set); `rho_tol` states the accepted level.
+    assert!((rho - RHO_TRUE).abs() < rho_tol, "rho* = {rho}");
+    let post = &cal.posterior;
+    let ci = post.ci95()[0];
+    match theta_tol {
+        None => assert!(
+            ci.0 <= THETA_STAR_IN && THETA_STAR_IN <= ci.1,
+            "95% CI {ci:?} misses θ* (mean {:?})",
+            post.mean()
+        ),
+        Some(t) => assert!(
+            (post.mean()[0] - THETA_STAR_IN).abs() < t,
+            "posterior mean {:?}",
+            post.mean()
+        ),
+    }
+    let with = (post.mean()[0] - THETA_STAR_IN).abs();
+    let without = (cal.posterior_no_discrepancy.mean()[0] - THETA_STAR_IN).abs();
+    assert!(
+        with < without,
+        "with discrepancy |err| {with} not below without {without}"
+    );
+
+    // Module 4 at new inputs (Fig. 17-20): strains and reactions, BA-MUDI vs the uncorrected
+    // model (ρ = 1, no δ, θ at the no-discrepancy posterior mean).
+    let theta_nd = cal.posterior_no_discrepancy.mean();
+    let mut g = Normal64::new(4242);
+    let (mut strain_err, mut strain_err_nd, mut strain_disc) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut resp_err, mut resp_err_nd) = (Vec::new(), Vec::new());
+    for _ in 0..10 {
+        let x = [
+            P_RANGE_LBF.0 + (P_RANGE_LBF.1 - P_RANGE_LBF.0) * g.uniform(),
+            Q_RANGE_LBF_PER_IN.0 + (Q_RANGE_LBF_PER_IN.1 - Q_RANGE_LBF_PER_IN.0) * g.uniform(),
+        ];
+        let truth = true_reaction(&model.unobservable, &x, THETA_STAR_IN, RHO_TRUE);
+        let delta: Vec<f64> = model
+            .unobservable
+            .coordinates()
+            .iter()
+            .map(|&d| true_discrepancy(&x, d, THETA_STAR_IN))
+            .collect();
+        let mut nd = vec![0.0; 41];
+        model.unobservable.evaluate(&x, &theta_nd, &mut nd).unwrap();
+        let strain = |r: &[f64]| -> Vec<f64> {
+            let mut out = vec![0.0; 7];
+            mlmodel::ObservableModel::evaluate(
+                &model.observable,
+                &x,
+                &[THETA_STAR_IN],
+                r,
+                &mut out,
+            )
+            .unwrap();
+            out
+        };
+        let (s_true, s_nd) = (strain(&truth), strain(&nd));
+        let a_delta = model.observable.matrix() * nalgebra::DVector::from_column_slice(&delta);
+        let band = cal.predict_outputs(model, &x).unwrap();
+        for p in 0..7 {
+            strain_err.push(band.mean[p] - s_true[p]);
+            strain_err_nd.push(s_nd[p] - s_true[p]);
+            strain_disc.push(a_delta[p]);
+            assert!(band.lower[p] <= band.mean[p] + 1e-9 && band.mean[p] <= band.upper[p] + 1e-9);
+        }
+        let resp = cal.predict_response(model, &x).unwrap();
+        for b in 0..41 {
+            resp_err.push(resp.mean[b] - truth[b]);
+            resp_err_nd.push(nd[b] - truth[b]);
+        }
+    }
+    let (e, e_nd, d) = (
+        rms(strain_err.into_iter()),
+        rms(strain_err_nd.into_iter()),
+        rms(strain_disc.into_iter()),
+    );
+    let (r, r_nd) = (rms(resp_err.into_iter()), rms(resp_err_nd.into_iter()));
+    if std::env::var_os("BAMUDI_DEBUG").is_some() {
+        eprintln!(
+            "strain RMS err {e} (uncorrected {e_nd}, A delta {d}); reaction RMS err {r} (uncorrected {r_nd})"
+        );
+    }
+    if theta_tol.is_none() {
+        // exact estimator: "well below the discrepancy itself", a third of the discrepancy's
+        // strain effect and of the uncorrected model's error
+        assert!(
+            e < d / 3.0 && e < e_nd / 3.0,
+            "strain RMS error {e} vs A·δ {d} and uncorrected {e_nd} (microstrain)"
+        );
+    } else {
+        // learnt estimator (known weakness, see the crate docs): only better than uncorrected
+        assert!(
+            e < e_nd,
+            "strain RMS error {e} vs uncorrected {e_nd} (microstrain)"
+        );
+    }
+    assert!(
+        r < r_nd,
+        "reaction RMS error {r} vs uncorrected {r_nd} (lbf/in)"
+    );
+}
+
+#[test]
+fn beam_calibration_with_the_exact_estimator_recovers_the_truth() {
+    let model = beam_model(PRIOR_IN, TERMS);
+    let exps = experiments(60, 1);
+    let cfg = CalibrationConfig::default()
+        .estimator(EstimatorConfig::ExactLinear)
+        .sigma_eps(Some(SIGMA_MICROSTRAIN))
+        .theta_grid_points(101)
+        .gp_restarts(1)
+        .progress(false)
+        .seed(3);
+    let cal = calibrate(&model, &exps, &cfg).unwrap();
+    check_calibration(&cal, &model, 0.21, None);
+    // the grid posterior is a density
+    if let bamudi::ThetaPosterior::Grid(g) = &cal.posterior {
+        assert!((g.cdf.last().unwrap() - 1.0).abs() < 1e-12);
+    }
+    // serialisable, and the same seed reproduces the same numbers
+    let path = std::env::temp_dir().join(format!("bamudi_e2e_{}.json", std::process::id()));
+    cal.save(&path).unwrap();
+    let back = bamudi::Calibration::load(&path).unwrap();
+    assert_eq!(back.rho, cal.rho);
+    let again = calibrate(&model, &exps, &cfg).unwrap();
+    assert_eq!(again.posterior, cal.posterior);
+}
+
+#[test]
+fn beam_calibration_with_the_smartcore_ridge_estimator() {
+    let model = beam_model(PRIOR_IN, TERMS);
+    let exps = experiments(60, 2);
+    let cfg = CalibrationConfig::default()
+        .estimator(EstimatorConfig::Ridge { lambda: 1e-6 })
+        .training_size(3000)
+        .sigma_eps(Some(SIGMA_MICROSTRAIN))
+        .theta_grid_points(101)
+        .gp_restarts(1)
+        .progress(false)
+        .seed(4);
+    let cal = calibrate(&model, &exps, &cfg).unwrap();
+    assert_eq!(cal.training_pool_size, 300);
+    // 1 in = 5% of the prior width
+    check_calibration(&cal, &model, 0.21, Some(1.0));
+}
+
+#[test]
+fn rho_is_recovered_when_theta_is_nearly_known() {
+    // With the prior collapsed around θ*, Eq. 31 no longer smears g_u over θ, so the only
+    // confounding left is the part of δ outside the span of the Legendre basis.
+    let model = beam_model((THETA_STAR_IN - 0.1, THETA_STAR_IN + 0.1), TERMS);
+    let exps = experiments(60, 5);
+    let cfg = CalibrationConfig::default()
+        .estimator(EstimatorConfig::ExactLinear)
+        .sigma_eps(Some(SIGMA_MICROSTRAIN))
+        .theta_grid_points(21)
+        .gp_restarts(0)
+        .progress(false);
+    let cal = calibrate(&model, &exps, &cfg).unwrap();
+    let rho = cal.rho.rho_star;
+    // Standard error of ρ from the curvature of the sum of squares S(ρ) ≈ S_min + c (ρ − ρ̂)²:
+    // sd(ρ̂) ≈ σ_ε / √c. Allow three standard errors.
+    let g = &cal.rho.grid;
+    let (a, m, b) = (g[50].sum_squares, g[70].sum_squares, g[90].sum_squares);
+    let c = (a - 2.0 * m + b) / (2.0 * 0.2f64.powi(2));
+    let sd = SIGMA_MICROSTRAIN / c.sqrt();
+    assert!((rho - RHO_TRUE).abs() < 3.0 * sd, "rho* = {rho}, sd {sd}");
+}
+
+#[path = "e2e/reproduce_quick.rs"]
+mod reproduce_quick;
