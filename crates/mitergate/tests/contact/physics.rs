@@ -239,7 +239,8 @@ proptest! {
                 prop_assert_eq!(sol.forces[n + b], 0.0);
             }
         }
-        prop_assert!(sol.tangential_residual <= 1e-10);
+        // The solver's default tolerance on the tangential law.
+        prop_assert!(sol.tangential_residual <= 1e-8);
         // The normal resultant pushes the gate away from the wall whenever there is head.
         if x[0] - x[1] > 1.0 {
             prop_assert!(resultants(m, &sol.forces)[0] > 0.0);

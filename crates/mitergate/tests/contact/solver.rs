@@ -60,10 +60,10 @@ fn solutions_satisfy_the_contact_laws() {
         );
         assert!(r[1] < 1e-8, "normal law residual {r:?}");
         assert!(r[2] < 1e-8, "penetration without force {r:?}");
-        // The tangential fixed point stops at the default relative tolerance 1e-10; the
-        // re-check adds the rounding above.
-        assert!(r[3] < 1e-8, "tangential law residual {r:?}");
-        assert!(sol.tangential_residual <= 1e-10);
+        // The tangential fixed point stops at the default relative tolerance 1e-8; the
+        // re-check adds the rounding above (~1e-10), hence the factor 2.
+        assert!(r[3] < 2e-8, "tangential law residual {r:?}");
+        assert!(sol.tangential_residual <= 1e-8);
     }
 }
 
