@@ -681,31 +681,15 @@ impl Calibration {
         x: &[f64],
     ) -> Result<Band> {
         self.check_x(x)?;
-        let (mu, var) = self.alpha_at(x)?;
-        let l = &self.parts.l;
-        let shift = l * nalgebra::DVector::from_vec(mu);
-        let gauss_sd: Vec<f64> = (0..l.nrows())
-            .map(|b| {
-                (0..l.ncols())
-                    .map(|k| l[(b, k)].powi(2) * var[k])
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .collect();
-        let support = self.posterior.support(400);
-        let mut g = vec![0.0; l.nrows()];
-        let mut comp = Vec::with_capacity(support.len());
-        for (theta, _) in &support {
+        let (shift, gauss_sd) = self.projected_alpha(&self.parts.l, x)?;
+        let mut g = vec![0.0; self.parts.l.nrows()];
+        self.theta_mixture(&gauss_sd, |theta| {
             model.unobservable.evaluate(x, theta, &mut g)?;
-            comp.push(
-                g.iter()
-                    .zip(shift.iter())
-                    .map(|(g, s)| self.rho.rho_star * g + s)
-                    .collect::<Vec<f64>>(),
-            );
-        }
-        let weights: Vec<f64> = support.iter().map(|s| s.1).collect();
-        Ok(mixture_band(&comp, &weights, &gauss_sd))
+            Ok(g.iter()
+                .zip(shift.iter())
+                .map(|(g, s)| self.rho.rho_star * g + s)
+                .collect())
+        })
     }
 
     /// Module 4 for the observable outputs at `x`: mixture over `θ` of
@@ -717,53 +701,26 @@ impl Calibration {
         x: &[f64],
     ) -> Result<Band> {
         self.check_x(x)?;
-        let (mu, var) = self.alpha_at(x)?;
         let bm = &self.parts.b;
-        let shift = bm * nalgebra::DVector::from_vec(mu);
-        let gauss_sd: Vec<f64> = (0..bm.nrows())
-            .map(|p| {
-                (0..bm.ncols())
-                    .map(|k| bm[(p, k)].powi(2) * var[k])
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .collect();
-        let support = self.posterior.support(400);
+        let (shift, gauss_sd) = self.projected_alpha(bm, x)?;
         let mut g = vec![0.0; self.parts.l.nrows()];
         let mut off = vec![0.0; bm.nrows()];
-        let mut comp = Vec::with_capacity(support.len());
-        for (theta, _) in &support {
+        self.theta_mixture(&gauss_sd, |theta| {
             model.unobservable.evaluate(x, theta, &mut g)?;
             model.observable.offset(x, theta, &mut off)?;
             let ag = &self.parts.a * nalgebra::DVector::from_column_slice(&g);
-            comp.push(
-                (0..bm.nrows())
-                    .map(|p| self.rho.rho_star * ag[p] + off[p] + shift[p])
-                    .collect::<Vec<f64>>(),
-            );
-        }
-        let weights: Vec<f64> = support.iter().map(|s| s.1).collect();
-        Ok(mixture_band(&comp, &weights, &gauss_sd))
+            Ok((0..bm.nrows())
+                .map(|p| self.rho.rho_star * ag[p] + off[p] + shift[p])
+                .collect())
+        })
     }
 
     /// The reconstructed discrepancy `L μ_α(x)` with a 95% band `± 1.96 sd` from the GP
     /// variances (Eq. 37; Fig. 15).
     pub fn predict_discrepancy(&self, x: &[f64]) -> Result<Band> {
         self.check_x(x)?;
-        let (mu, var) = self.alpha_at(x)?;
-        let l = &self.parts.l;
-        let mean: Vec<f64> = (l * nalgebra::DVector::from_vec(mu))
-            .iter()
-            .copied()
-            .collect();
-        let sd: Vec<f64> = (0..l.nrows())
-            .map(|b| {
-                (0..l.ncols())
-                    .map(|k| l[(b, k)].powi(2) * var[k])
-                    .sum::<f64>()
-                    .sqrt()
-            })
-            .collect();
+        let (shift, sd) = self.projected_alpha(&self.parts.l, x)?;
+        let mean: Vec<f64> = shift.iter().copied().collect();
         let lower = mean
             .iter()
             .zip(&sd)
@@ -780,6 +737,43 @@ impl Calibration {
             lower,
             upper,
         })
+    }
+
+    /// The GP coefficient moments at `x` projected through `m` (`L` or `B = A L`): the mean
+    /// `m μ_α(x)` and the per-row standard deviation `sqrt(diag(m Σ_α(x) mᵀ))` (independent
+    /// coefficient GPs, so `Σ_α` is diagonal).
+    fn projected_alpha(
+        &self,
+        m: &DMatrix<f64>,
+        x: &[f64],
+    ) -> Result<(nalgebra::DVector<f64>, Vec<f64>)> {
+        let (mu, var) = self.alpha_at(x)?;
+        let shift = m * nalgebra::DVector::from_vec(mu);
+        let sd = (0..m.nrows())
+            .map(|r| {
+                (0..m.ncols())
+                    .map(|k| m[(r, k)].powi(2) * var[k])
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .collect();
+        Ok((shift, sd))
+    }
+
+    /// The band of the mixture over the `θ` posterior support whose component means are
+    /// `component(θ_j)`, with the common per-point Gaussian spread `gauss_sd`.
+    fn theta_mixture(
+        &self,
+        gauss_sd: &[f64],
+        mut component: impl FnMut(&[f64]) -> Result<Vec<f64>>,
+    ) -> Result<Band> {
+        let support = self.posterior.support(400);
+        let comp = support
+            .iter()
+            .map(|(theta, _)| component(theta))
+            .collect::<Result<Vec<_>>>()?;
+        let weights: Vec<f64> = support.iter().map(|s| s.1).collect();
+        Ok(mixture_band(&comp, &weights, gauss_sd))
     }
 }
 
