@@ -8,9 +8,13 @@
 //!   strain matrix `A = Λᵀ Q blockdiag(T, T)` (never `2 N_u` forward solves);
 //! * the water terms are `Λᵀ f_w(h)` and `Xᵀ f_w(h)` tabulated with their `h`-derivatives at the
 //!   skin-node heights (exact piecewise cubics, [`HydrostaticTable`]).
+//!
+//! The algorithm is written once, against [`CondensationSource`]: the parametric
+//! [`GateModel`] and an imported deck ([`crate::inp::ImportedModel::condense`]) both feed it.
 
 use crate::GateError;
 use crate::condensed::{CondensedGate, HydrostaticTable};
+use crate::fe::ShellModel;
 use crate::loads::load_transfer;
 use crate::model::{GateModel, dmatrix};
 use faer::Mat;
@@ -18,6 +22,70 @@ use nalgebra::DMatrix;
 
 /// Default number of quoin force representation points (paper Sec. 4.2).
 pub const DEFAULT_NU: usize = 509;
+
+/// Sparse full-DOF vector: `(full dof, value)` pairs (repeated dofs add up).
+pub(crate) type SparseLoad = Vec<(usize, f64)>;
+
+/// Everything the condensation needs from a supported, factored FE model of a leaf.
+pub(crate) trait CondensationSource {
+    /// The factored model (sparse solves and the support map).
+    fn shell_model(&self) -> &ShellModel;
+    /// Quoin height `H` (in): the representation points span `[0, H]`.
+    fn quoin_height(&self) -> f64;
+    /// Heights (in above the sill) of the `m` quoin nodes, strictly increasing.
+    fn quoin_node_heights(&self) -> Vec<f64>;
+    /// Unit nodal loads along `n` (first `m`) and `t` (next `m`) at the quoin nodes, in the
+    /// order of [`Self::quoin_node_heights`].
+    fn quoin_unit_loads(&self) -> Vec<SparseLoad>;
+    /// `(name, strain functional in microstrain per unit full DOF)` of every gauge.
+    fn gauge_functionals(&self) -> Vec<(String, SparseLoad)>;
+    /// Breakpoints (in) of the hydrostatic tables: the heights where the water response
+    /// changes polynomial piece (the skin-node heights), strictly increasing.
+    fn water_breakpoints(&self) -> Vec<f64>;
+    /// Nodal loads of water at level `h` (in) on the upstream face, or their `h`-derivative.
+    fn upstream_water_load(&self, h: f64, derivative: bool) -> Result<SparseLoad, GateError>;
+}
+
+impl CondensationSource for GateModel {
+    fn shell_model(&self) -> &ShellModel {
+        self.fe()
+    }
+    fn quoin_height(&self) -> f64 {
+        self.config().geometry.quoin_height
+    }
+    fn quoin_node_heights(&self) -> Vec<f64> {
+        self.quoin_heights()
+    }
+    fn quoin_unit_loads(&self) -> Vec<SparseLoad> {
+        GateModel::quoin_unit_loads(self)
+    }
+    fn gauge_functionals(&self) -> Vec<(String, SparseLoad)> {
+        self.gauges()
+            .iter()
+            .map(|g| (g.name.clone(), g.terms.clone()))
+            .collect()
+    }
+    fn water_breakpoints(&self) -> Vec<f64> {
+        let shell = &self.mesh().shell;
+        sorted_unique(
+            self.mesh()
+                .skin_elements()
+                .iter()
+                .flat_map(|&e| shell.elements[e].nodes.map(|n| shell.nodes[n][2]))
+                .collect(),
+        )
+    }
+    fn upstream_water_load(&self, h: f64, derivative: bool) -> Result<SparseLoad, GateError> {
+        self.water_load_sparse(h, derivative)
+    }
+}
+
+/// Sorted, exact duplicates removed.
+pub(crate) fn sorted_unique(mut v: Vec<f64>) -> Vec<f64> {
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
+}
 
 impl GateModel {
     /// Condenses the gate to `nu` uniformly spaced quoin representation points over `[0, H]`
@@ -32,91 +100,98 @@ impl GateModel {
     /// assert_eq!(cg.a_matrix.shape(), (7, 102));
     /// ```
     pub fn condense(&self, nu: usize) -> Result<CondensedGate, GateError> {
-        if nu < 2 {
-            return Err(GateError::InvalidInput {
-                what: "nu".into(),
-                reason: format!("need at least 2 representation points, got {nu}"),
-            });
-        }
-        let h = self.config().geometry.quoin_height;
-        let nu_points: Vec<f64> = (0..nu).map(|b| h * b as f64 / (nu - 1) as f64).collect();
-        let heights = self.quoin_heights();
-        let m = heights.len();
-        let n_g = self.gauges().len();
-        let fe = self.fe();
-        // right-hand sides: 2m unit quoin loads, then one adjoint load per gauge
-        let mut loads = self.quoin_unit_loads();
-        loads.extend(self.gauges().iter().map(|g| g.terms.clone()));
-        let sol = fe.solve_sparse_loads(&loads);
-        let reduced: Vec<Vec<(usize, f64)>> = loads.iter().map(|l| fe.reduce_sparse(l)).collect();
-        let dot = |load: &[(usize, f64)], col: usize| {
-            load.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>()
-        };
-        // C[i][j] = Q_iᵀ K⁻¹ Q_j
-        let c = dmatrix(2 * m, 2 * m, |i, j| dot(&reduced[i], j));
-        // nodal gauge sensitivities G[g][j] = λ_gᵀ Q_j
-        let g_nodal = dmatrix(n_g, 2 * m, |g, j| dot(&reduced[j], 2 * m + g));
-        let t = load_transfer(&heights, &nu_points)?;
-        let mut a = DMatrix::zeros(n_g, 2 * nu);
-        a.columns_mut(0, nu)
-            .copy_from(&(g_nodal.columns(0, m) * &t));
-        a.columns_mut(nu, nu)
-            .copy_from(&(g_nodal.columns(m, m) * &t));
-        let (water_strain, water_quoin) = self.water_tables(&sol, m, n_g)?;
-        Ok(CondensedGate {
-            quoin_height: h,
-            quoin_node_heights: heights,
-            quoin_flexibility: c,
-            water_quoin_displacement: water_quoin,
-            gauge_names: self.gauge_names(),
-            water_strain,
-            nu_points,
-            load_transfer: t,
-            a_matrix: a,
-        })
+        condense(self, nu)
     }
+}
 
-    /// Hydrostatic tables of gauge strains (columns `2m..2m+n_g` of `sol`) and quoin
-    /// displacements (columns `0..2m`) at the skin-node heights.
-    fn water_tables(
-        &self,
-        sol: &Mat<f64>,
-        m: usize,
-        n_g: usize,
-    ) -> Result<(HydrostaticTable, HydrostaticTable), GateError> {
-        let fe = self.fe();
-        let mut bp: Vec<f64> = self
-            .mesh()
-            .skin_elements()
-            .iter()
-            .flat_map(|&e| {
-                self.mesh().shell.elements[e]
-                    .nodes
-                    .map(|n| self.mesh().shell.nodes[n][2])
-            })
-            .collect();
-        bp.sort_by(f64::total_cmp);
-        bp.dedup();
-        let nb = bp.len();
-        let mut sv = DMatrix::zeros(nb, n_g);
-        let mut ss = DMatrix::zeros(nb, n_g);
-        let mut qv = DMatrix::zeros(nb, 2 * m);
-        let mut qs = DMatrix::zeros(nb, 2 * m);
-        for (k, &z) in bp.iter().enumerate() {
-            for (deriv, strain, quoin) in [(false, &mut sv, &mut qv), (true, &mut ss, &mut qs)] {
-                let f = fe.reduce_sparse(&self.water_load_sparse(z, deriv)?);
-                let dot = |col: usize| f.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>();
-                for g in 0..n_g {
-                    strain[(k, g)] = dot(2 * m + g);
-                }
-                for j in 0..2 * m {
-                    quoin[(k, j)] = dot(j);
-                }
+/// The condensation of any [`CondensationSource`] to `nu` uniformly spaced representation
+/// points over `[0, H]`.
+pub(crate) fn condense(
+    src: &impl CondensationSource,
+    nu: usize,
+) -> Result<CondensedGate, GateError> {
+    if nu < 2 {
+        return Err(GateError::InvalidInput {
+            what: "nu".into(),
+            reason: format!("need at least 2 representation points, got {nu}"),
+        });
+    }
+    let h = src.quoin_height();
+    let nu_points: Vec<f64> = (0..nu).map(|b| h * b as f64 / (nu - 1) as f64).collect();
+    let heights = src.quoin_node_heights();
+    let m = heights.len();
+    let gauges = src.gauge_functionals();
+    let n_g = gauges.len();
+    let fe = src.shell_model();
+    // right-hand sides: 2m unit quoin loads, then one adjoint load per gauge
+    let mut loads = src.quoin_unit_loads();
+    if loads.len() != 2 * m {
+        return Err(GateError::DimensionMismatch {
+            what: "quoin unit loads (2 m)".into(),
+            expected: 2 * m,
+            got: loads.len(),
+        });
+    }
+    let (gauge_names, gauge_terms): (Vec<String>, Vec<SparseLoad>) = gauges.into_iter().unzip();
+    loads.extend(gauge_terms);
+    let sol = fe.solve_sparse_loads(&loads);
+    let reduced: Vec<SparseLoad> = loads.iter().map(|l| fe.reduce_sparse(l)).collect();
+    let dot = |load: &[(usize, f64)], col: usize| {
+        load.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>()
+    };
+    // C[i][j] = Q_iᵀ K⁻¹ Q_j
+    let c = dmatrix(2 * m, 2 * m, |i, j| dot(&reduced[i], j));
+    // nodal gauge sensitivities G[g][j] = λ_gᵀ Q_j
+    let g_nodal = dmatrix(n_g, 2 * m, |g, j| dot(&reduced[j], 2 * m + g));
+    let t = load_transfer(&heights, &nu_points)?;
+    let mut a = DMatrix::zeros(n_g, 2 * nu);
+    a.columns_mut(0, nu)
+        .copy_from(&(g_nodal.columns(0, m) * &t));
+    a.columns_mut(nu, nu)
+        .copy_from(&(g_nodal.columns(m, m) * &t));
+    let (water_strain, water_quoin) = water_tables(src, &sol, m, n_g)?;
+    Ok(CondensedGate {
+        quoin_height: h,
+        quoin_node_heights: heights,
+        quoin_flexibility: c,
+        water_quoin_displacement: water_quoin,
+        gauge_names,
+        water_strain,
+        nu_points,
+        load_transfer: t,
+        a_matrix: a,
+    })
+}
+
+/// Hydrostatic tables of gauge strains (columns `2m..2m+n_g` of `sol`) and quoin
+/// displacements (columns `0..2m`) at the water breakpoints.
+fn water_tables(
+    src: &impl CondensationSource,
+    sol: &Mat<f64>,
+    m: usize,
+    n_g: usize,
+) -> Result<(HydrostaticTable, HydrostaticTable), GateError> {
+    let fe = src.shell_model();
+    let bp = src.water_breakpoints();
+    let nb = bp.len();
+    let mut sv = DMatrix::zeros(nb, n_g);
+    let mut ss = DMatrix::zeros(nb, n_g);
+    let mut qv = DMatrix::zeros(nb, 2 * m);
+    let mut qs = DMatrix::zeros(nb, 2 * m);
+    for (k, &z) in bp.iter().enumerate() {
+        for (deriv, strain, quoin) in [(false, &mut sv, &mut qv), (true, &mut ss, &mut qs)] {
+            let f = fe.reduce_sparse(&src.upstream_water_load(z, deriv)?);
+            let dot = |col: usize| f.iter().map(|&(r, c)| c * sol[(r, col)]).sum::<f64>();
+            for g in 0..n_g {
+                strain[(k, g)] = dot(2 * m + g);
+            }
+            for j in 0..2 * m {
+                quoin[(k, j)] = dot(j);
             }
         }
-        Ok((
-            HydrostaticTable::new(bp.clone(), sv, ss)?,
-            HydrostaticTable::new(bp, qv, qs)?,
-        ))
     }
+    Ok((
+        HydrostaticTable::new(bp.clone(), sv, ss)?,
+        HydrostaticTable::new(bp, qv, qs)?,
+    ))
 }

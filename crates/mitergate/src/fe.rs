@@ -36,6 +36,82 @@ pub struct ShellMesh {
     pub elements: Vec<QuadElement>,
 }
 
+/// An element given directly by its global stiffness (6 DOFs per node `[ux, uy, uz, rx, ry,
+/// rz]`, node by node), assembled into a [`ShellModel`] next to the shell quadrilaterals: the
+/// beams ([`crate::beam`]) and shell triangles ([`crate::tri`]) of imported decks.
+///
+/// ```
+/// use mitergate::fe::GeneralElement;
+/// use nalgebra::DMatrix;
+/// // an axial spring of 10 lbf/in along x between nodes 0 and 1
+/// let mut k = DMatrix::zeros(12, 12);
+/// k[(0, 0)] = 10.0; k[(6, 6)] = 10.0; k[(0, 6)] = -10.0; k[(6, 0)] = -10.0;
+/// let e = GeneralElement::new(vec![0, 1], k).unwrap();
+/// assert_eq!(e.nodes(), &[0, 1]);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneralElement {
+    nodes: Vec<usize>,
+    stiffness: nalgebra::DMatrix<f64>,
+}
+
+impl GeneralElement {
+    /// `stiffness` must be square of size `6 * nodes.len()`, finite and symmetric (to 1e-9
+    /// of its largest entry).
+    ///
+    /// ```
+    /// use mitergate::fe::GeneralElement;
+    /// assert!(GeneralElement::new(vec![0, 1], nalgebra::DMatrix::zeros(6, 6)).is_err());
+    /// ```
+    pub fn new(nodes: Vec<usize>, stiffness: nalgebra::DMatrix<f64>) -> Result<Self, GateError> {
+        let n = 6 * nodes.len();
+        if stiffness.shape() != (n, n) {
+            return Err(GateError::DimensionMismatch {
+                what: "general element stiffness (6 x nodes per side)".into(),
+                expected: n,
+                got: stiffness.nrows(),
+            });
+        }
+        let scale = stiffness.amax();
+        let asym = (&stiffness - stiffness.transpose()).amax();
+        if !(scale.is_finite() && asym <= 1e-9 * scale) {
+            return Err(GateError::InvalidMesh(format!(
+                "general element on nodes {nodes:?}: stiffness is not finite and symmetric \
+                 (max |K - Kᵀ| = {asym:e}, max |K| = {scale:e})"
+            )));
+        }
+        Ok(Self { nodes, stiffness })
+    }
+
+    /// Node indices.
+    ///
+    /// ```
+    /// # use mitergate::fe::GeneralElement;
+    /// let e = GeneralElement::new(vec![3], nalgebra::DMatrix::zeros(6, 6)).unwrap();
+    /// assert_eq!(e.nodes(), &[3]);
+    /// ```
+    pub fn nodes(&self) -> &[usize] {
+        &self.nodes
+    }
+
+    /// Global stiffness (`6n x 6n`).
+    ///
+    /// ```
+    /// # use mitergate::fe::GeneralElement;
+    /// let e = GeneralElement::new(vec![3], nalgebra::DMatrix::identity(6, 6)).unwrap();
+    /// assert_eq!(e.stiffness()[(5, 5)], 1.0);
+    /// ```
+    pub fn stiffness(&self) -> &nalgebra::DMatrix<f64> {
+        &self.stiffness
+    }
+
+    fn dofs(&self) -> impl Iterator<Item = usize> + '_ {
+        self.nodes
+            .iter()
+            .flat_map(|&n| (0..6).map(move |k| 6 * n + k))
+    }
+}
+
 /// A support condition.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Support {
@@ -86,6 +162,7 @@ impl DofMap {
 pub struct ShellModel {
     mesh: ShellMesh,
     quads: Vec<ShellQuad>,
+    general: Vec<GeneralElement>,
     supports: Vec<Support>,
     map: DofMap,
     symbolic: SymbolicCholesky<usize>,
@@ -117,7 +194,45 @@ impl ShellModel {
         drilling_penalty: f64,
         supports: Vec<Support>,
     ) -> Result<Self, GateError> {
+        Self::build_with_elements(mesh, material, drilling_penalty, supports, Vec::new())
+    }
+
+    /// As [`ShellModel::build`], with further elements given by their global stiffness
+    /// (beams, triangles) assembled into the same sparse system.
+    ///
+    /// ```
+    /// use mitergate::fe::{GeneralElement, ShellMesh, ShellModel, Support};
+    /// use mitergate::shell::ShellMaterial;
+    /// // two nodes joined only by a general element (a 6-DOF spring of 1e3 per DOF)
+    /// let mesh = ShellMesh { nodes: vec![[0., 0., 0.], [1., 0., 0.]], elements: vec![] };
+    /// let mut k = nalgebra::DMatrix::zeros(12, 12);
+    /// for i in 0..6 {
+    ///     k[(i, i)] = 1e3; k[(i + 6, i + 6)] = 1e3; k[(i, i + 6)] = -1e3; k[(i + 6, i)] = -1e3;
+    /// }
+    /// let spring = GeneralElement::new(vec![0, 1], k).unwrap();
+    /// let fixed = (0..6).map(|dof| Support::Fixed { node: 0, dof }).collect();
+    /// let m = ShellMaterial { youngs_modulus: 29e6, poisson_ratio: 0.3 };
+    /// let model = ShellModel::build_with_elements(mesh, m, 1e-3, fixed, vec![spring]).unwrap();
+    /// let mut f = vec![0.0; 12];
+    /// f[8] = 2.0;
+    /// assert!((model.solve(&f).unwrap()[8] - 2e-3).abs() < 1e-15);
+    /// ```
+    pub fn build_with_elements(
+        mesh: ShellMesh,
+        material: ShellMaterial,
+        drilling_penalty: f64,
+        supports: Vec<Support>,
+        general: Vec<GeneralElement>,
+    ) -> Result<Self, GateError> {
         let quads = element_operators(&mesh, material, drilling_penalty)?;
+        for (i, g) in general.iter().enumerate() {
+            if let Some(&n) = g.nodes.iter().find(|&&n| n >= mesh.nodes.len()) {
+                return Err(GateError::InvalidMesh(format!(
+                    "general element {i} refers to node {n} but the mesh has {} nodes",
+                    mesh.nodes.len()
+                )));
+            }
+        }
         let map = support_map(&mesh, &supports)?;
         check_rigid_modes(&mesh, &supports)?;
         let mut reduced_owner = vec![(0, 0); map.n_reduced];
@@ -126,7 +241,7 @@ impl ShellModel {
                 reduced_owner[r] = (dof / 6, dof % 6);
             }
         }
-        let k = assemble_reduced(&mesh, &quads, &map)?;
+        let k = assemble_reduced(&mesh, &quads, &general, &map)?;
         check_diagonal(&k, &reduced_owner, &mesh)?;
         let symbolic = factorize_symbolic_cholesky(
             k.symbolic(),
@@ -139,6 +254,7 @@ impl ShellModel {
         Ok(Self {
             mesh,
             quads,
+            general,
             supports,
             map,
             symbolic,
@@ -210,6 +326,38 @@ impl ShellModel {
     /// ```
     pub fn quads(&self) -> &[ShellQuad] {
         &self.quads
+    }
+
+    /// The supports the model was built with.
+    ///
+    /// ```
+    /// # use mitergate::fe::{QuadElement, ShellMesh, ShellModel, Support};
+    /// # use mitergate::shell::ShellMaterial;
+    /// # let mesh = ShellMesh { nodes: vec![[0.,0.,0.],[1.,0.,0.],[1.,1.,0.],[0.,1.,0.]],
+    /// #   elements: vec![QuadElement { nodes: [0, 1, 2, 3], thickness: 0.1 }] };
+    /// # let s: Vec<Support> = [0, 3].iter().flat_map(|&node| (0..6).map(move |dof| Support::Fixed { node, dof })).collect();
+    /// # let m = ShellMaterial { youngs_modulus: 29e6, poisson_ratio: 0.3 };
+    /// let model = ShellModel::build(mesh, m, 1e-3, s).unwrap();
+    /// assert_eq!(model.supports().len(), 12);
+    /// ```
+    pub fn supports(&self) -> &[Support] {
+        &self.supports
+    }
+
+    /// The elements given by their global stiffness (see [`ShellModel::build_with_elements`]).
+    ///
+    /// ```
+    /// # use mitergate::fe::{QuadElement, ShellMesh, ShellModel, Support};
+    /// # use mitergate::shell::ShellMaterial;
+    /// # let mesh = ShellMesh { nodes: vec![[0.,0.,0.],[1.,0.,0.],[1.,1.,0.],[0.,1.,0.]],
+    /// #   elements: vec![QuadElement { nodes: [0, 1, 2, 3], thickness: 0.1 }] };
+    /// # let s: Vec<Support> = [0, 3].iter().flat_map(|&node| (0..6).map(move |dof| Support::Fixed { node, dof })).collect();
+    /// # let m = ShellMaterial { youngs_modulus: 29e6, poisson_ratio: 0.3 };
+    /// let model = ShellModel::build(mesh, m, 1e-3, s).unwrap();
+    /// assert!(model.general_elements().is_empty());
+    /// ```
+    pub fn general_elements(&self) -> &[GeneralElement] {
+        &self.general
     }
 
     /// Maps a full load vector to the reduced unknowns: `Gᵀ f`.
@@ -334,6 +482,16 @@ impl ShellModel {
             let fe = k * ue;
             for (a, &d) in dofs.iter().enumerate() {
                 out[d] += fe[a];
+            }
+        }
+        for g in &self.general {
+            let dofs: Vec<usize> = g.dofs().collect();
+            for (a, &da) in dofs.iter().enumerate() {
+                out[da] += dofs
+                    .iter()
+                    .enumerate()
+                    .map(|(b, &db)| g.stiffness[(a, b)] * u[db])
+                    .sum::<f64>();
             }
         }
         out
@@ -580,6 +738,7 @@ fn check_rigid_modes(mesh: &ShellMesh, supports: &[Support]) -> Result<(), GateE
 fn assemble_reduced(
     mesh: &ShellMesh,
     quads: &[ShellQuad],
+    general: &[GeneralElement],
     map: &DofMap,
 ) -> Result<SparseColMat<usize, f64>, GateError> {
     let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(mesh.elements.len() * 300);
@@ -592,6 +751,20 @@ fn assemble_reduced(
                     for &(rb, cb) in map.row(dofs[b]) {
                         if ra <= rb {
                             trip.push(Triplet::new(ra, rb, ca * cb * k[(a, b)]));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for g in general {
+        let dofs: Vec<usize> = g.dofs().collect();
+        for (a, &da) in dofs.iter().enumerate() {
+            for &(ra, ca) in map.row(da) {
+                for (b, &db) in dofs.iter().enumerate() {
+                    for &(rb, cb) in map.row(db) {
+                        if ra <= rb {
+                            trip.push(Triplet::new(ra, rb, ca * cb * g.stiffness[(a, b)]));
                         }
                     }
                 }

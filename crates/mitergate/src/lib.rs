@@ -38,6 +38,11 @@
 //! assert_eq!(strains.len(), 7);
 //! ```
 //!
+//! Users with their own gate model bring it as an Abaqus / CalculiX deck ([`inp`]): `S4`/`S4R`
+//! quads, `S3` triangles ([`tri`]) and `B31` beams ([`beam`]) are built into the same sparse
+//! system, and [`inp::ImportedModel::condense`] with an [`inp::ImportSpec`] (quoin set, skin
+//! set, frame, gauges) gives the same [`condensed::CondensedGate`] through the same code.
+//!
 //! See `docs/mitergate.md` for the model description and `docs/verification.md` for the
 //! element and model verification.
 //!
@@ -59,6 +64,7 @@
 // `!(x > 0.0)` is used on purpose throughout: it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod beam;
 pub mod calculix;
 mod condense;
 pub mod condensed;
@@ -73,6 +79,7 @@ pub mod mesh;
 mod model;
 pub mod plot;
 pub mod shell;
+pub mod tri;
 pub mod truth;
 
 pub use condense::DEFAULT_NU;

@@ -163,3 +163,157 @@ fn min_max(it: impl Iterator<Item = f64>) -> (f64, f64) {
         (a.min(v), b.max(v))
     })
 }
+
+/// Gauss–Legendre rule on `[-1, 1]` (nodes, weights).
+fn gauss_rule(n: usize) -> (Vec<f64>, Vec<f64>) {
+    orthopoly::gauss_legendre(n, -1.0, 1.0).expect("n >= 1")
+}
+
+/// Outer (across the level lines) and inner (along `η`) Gauss orders of
+/// [`face_pressure_integrals`]: the inner integrand is a polynomial of degree <= 3 in `η`
+/// (3 points are exact), the outer one is piecewise smooth between the split points and a
+/// polynomial of degree <= 9 for flat parallelograms and triangles (8 points are exact).
+const OUTER_POINTS: usize = 8;
+const INNER_POINTS: usize = 3;
+
+/// `∫ N_i p dA` (lbf) for every node `i` of a flat 3- or 4-node face with node heights `z`
+/// (in above the sill) and coordinates `xyz` (in), under water at level `h`: `p = γ (h − z)₊`,
+/// or with `derivative` its `h`-derivative `γ [z < h]`. Quadrilaterals use the bilinear
+/// shapes on `[-1, 1]²`, triangles the linear ones on the unit triangle.
+///
+/// The wetted part `{z(ξ, η) < h}` is clipped exactly: for fixed `ξ` the height is linear in
+/// `η`, so the wetted `η`-interval is known in closed form, and the outer integral is split
+/// where that interval meets a side of the domain. On each piece the integrand is a
+/// polynomial (flat parallelograms and triangles: exact) or a smooth rational function
+/// (general quadrilaterals whose level lines are not parallel to a side: 8-point Gauss,
+/// accurate to round-off for the gently tapered elements of a skin plate).
+pub(crate) fn face_pressure_integrals(
+    xyz: &[[f64; 3]],
+    z: &[f64],
+    gamma: f64,
+    h: f64,
+    derivative: bool,
+) -> Vec<f64> {
+    let nn = z.len();
+    let mut out = vec![0.0; nn];
+    if z.iter().all(|&zi| zi >= h) {
+        return out;
+    }
+    // height z = c0 + c1 ξ + (d0 + d1 ξ) η; inner domain [lo0 + lo1 ξ, hi0 + hi1 ξ]
+    let (xi_range, c, d, lo, hi) = if nn == 4 {
+        let a0 = 0.25 * (z[0] + z[1] + z[2] + z[3]);
+        let a1 = 0.25 * (-z[0] + z[1] + z[2] - z[3]);
+        let a2 = 0.25 * (-z[0] - z[1] + z[2] + z[3]);
+        let a3 = 0.25 * (z[0] - z[1] + z[2] - z[3]);
+        ((-1.0, 1.0), (a0, a1), (a2, a3), (-1.0, 0.0), (1.0, 0.0))
+    } else {
+        (
+            (0.0, 1.0),
+            (z[0], z[1] - z[0]),
+            (z[2] - z[0], 0.0),
+            (0.0, 0.0),
+            (1.0, -1.0),
+        )
+    };
+    let scale = z.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(h.abs());
+    let mut splits = vec![xi_range.0, xi_range.1];
+    for b in [lo, hi] {
+        // (c0 + c1 ξ) + (d0 + d1 ξ)(b0 + b1 ξ) = h
+        let qa = d.1 * b.1;
+        let qb = c.1 + d.0 * b.1 + d.1 * b.0;
+        let qc = c.0 + d.0 * b.0 - h;
+        splits.extend(quadratic_roots(qa, qb, qc));
+    }
+    if d.1 != 0.0 {
+        splits.push(-d.0 / d.1);
+    }
+    splits.retain(|&s| s >= xi_range.0 && s <= xi_range.1);
+    splits.sort_by(f64::total_cmp);
+    splits.dedup();
+    let (go, wo) = gauss_rule(OUTER_POINTS);
+    let (gi, wi) = gauss_rule(INNER_POINTS);
+    for w in splits.windows(2) {
+        let (xa, xb) = (w[0], w[1]);
+        if xb - xa <= 1e-15 {
+            continue;
+        }
+        for (&s, &ws) in go.iter().zip(&wo) {
+            let xi = 0.5 * (xa + xb) + 0.5 * (xb - xa) * s;
+            let wx = 0.5 * (xb - xa) * ws;
+            let (lo_x, hi_x) = (lo.0 + lo.1 * xi, hi.0 + hi.1 * xi);
+            let (cx, dx) = (c.0 + c.1 * xi, d.0 + d.1 * xi);
+            let (ea, eb) = if dx.abs() <= 1e-14 * scale {
+                if cx < h { (lo_x, hi_x) } else { continue }
+            } else {
+                let cut = (h - cx) / dx;
+                if dx > 0.0 {
+                    (lo_x, hi_x.min(cut))
+                } else {
+                    (lo_x.max(cut), hi_x)
+                }
+            };
+            if eb <= ea {
+                continue;
+            }
+            for (&t, &wt) in gi.iter().zip(&wi) {
+                let eta = 0.5 * (ea + eb) + 0.5 * (eb - ea) * t;
+                let weight = wx * 0.5 * (eb - ea) * wt;
+                let (shape, area) = face_shape(xyz, xi, eta);
+                let zq: f64 = shape.iter().zip(z).map(|(n, zi)| n * zi).sum();
+                let p = if derivative {
+                    gamma
+                } else {
+                    gamma * (h - zq).max(0.0)
+                };
+                for (o, n) in out.iter_mut().zip(&shape) {
+                    *o += n * p * area * weight;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Real roots of `a x² + b x + c` (a linear equation when `a = 0`).
+fn quadratic_roots(a: f64, b: f64, c: f64) -> Vec<f64> {
+    if a == 0.0 {
+        return if b != 0.0 { vec![-c / b] } else { vec![] };
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return vec![];
+    }
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    let mut r = vec![q / a];
+    if q != 0.0 {
+        r.push(c / q);
+    }
+    r
+}
+
+/// Shape functions and area density `|x_ξ × x_η|` of a 3- or 4-node face at `(ξ, η)`.
+fn face_shape(xyz: &[[f64; 3]], xi: f64, eta: f64) -> (Vec<f64>, f64) {
+    let (n, dxi, deta): (Vec<f64>, Vec<f64>, Vec<f64>) = if xyz.len() == 4 {
+        let s = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        (
+            s.iter()
+                .map(|(a, b)| 0.25 * (1.0 + a * xi) * (1.0 + b * eta))
+                .collect(),
+            s.iter().map(|(a, b)| 0.25 * a * (1.0 + b * eta)).collect(),
+            s.iter().map(|(a, b)| 0.25 * b * (1.0 + a * xi)).collect(),
+        )
+    } else {
+        (
+            vec![1.0 - xi - eta, xi, eta],
+            vec![-1.0, 1.0, 0.0],
+            vec![-1.0, 0.0, 1.0],
+        )
+    };
+    let mut gx = nalgebra::Vector3::zeros();
+    let mut ge = nalgebra::Vector3::zeros();
+    for (k, p) in xyz.iter().enumerate() {
+        gx += nalgebra::Vector3::from(*p) * dxi[k];
+        ge += nalgebra::Vector3::from(*p) * deta[k];
+    }
+    (n, gx.cross(&ge).norm())
+}

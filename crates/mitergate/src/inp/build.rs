@@ -2,10 +2,12 @@
 
 use super::{InpElementType, InpModel, NodeRef};
 use crate::GateError;
-use crate::fe::{QuadElement, ShellMesh, ShellModel, Support, element_dofs};
+use crate::beam::{Beam, BeamMaterial, BeamSectionProperties};
+use crate::fe::{GeneralElement, QuadElement, ShellMesh, ShellModel, Support, element_dofs};
 use crate::shell::ShellMaterial;
-use nalgebra::Vector3;
-use std::collections::{BTreeMap, HashMap};
+use crate::tri::ShellTriangle;
+use nalgebra::{DMatrix, Vector3};
+use std::collections::{BTreeMap, HashMap, HashSet};
 
 /// The shell mesh of a deck, with the deck ids of its nodes and elements.
 #[derive(Debug, Clone, PartialEq)]
@@ -16,8 +18,17 @@ pub struct ImportedMesh {
     pub node_ids: Vec<u64>,
     /// Deck id of each mesh element.
     pub element_ids: Vec<u64>,
-    /// The (single) isotropic material of the shell sections.
+    /// The (single) isotropic material of the shell sections (`E = 1`, `ν = 0`, unused, when
+    /// the deck has beams only).
     pub material: ShellMaterial,
+    /// `S3` triangles: node indices and section thickness (in), deck order.
+    pub triangles: Vec<([usize; 3], f64)>,
+    /// Deck id of each triangle.
+    pub triangle_ids: Vec<u64>,
+    /// `B31` beams: node indices and the beam (section frame, properties, moduli).
+    pub beams: Vec<([usize; 2], Beam)>,
+    /// Deck id of each beam.
+    pub beam_ids: Vec<u64>,
 }
 
 /// A deck built into a supported and factored [`ShellModel`] (supports of the model level and
@@ -27,6 +38,12 @@ pub struct ImportedModel {
     deck: InpModel,
     mesh: ImportedMesh,
     index: HashMap<u64, usize>,
+    /// Deck element id → index in `mesh.mesh.elements`.
+    element_index: HashMap<u64, usize>,
+    /// Triangle operators (same order as `mesh.triangles`).
+    triangles: Vec<ShellTriangle>,
+    /// Deck triangle id → index in `mesh.triangles`.
+    triangle_index: HashMap<u64, usize>,
     model: ShellModel,
 }
 
@@ -51,47 +68,62 @@ impl InpModel {
         Ok(index)
     }
 
-    /// The shell mesh: `S4`/`S4R` elements with the thickness of their `*SHELL SECTION`.
-    /// `S3` and `B31` elements, elements without a section and sections with different
-    /// materials are errors ([`GateError::InpBuild`]).
+    /// The mesh: `S4`/`S4R` quadrilaterals and `S3` triangles with the thickness of their
+    /// `*SHELL SECTION`, `B31` beams with their `*BEAM SECTION` / `*BEAM GENERAL SECTION`
+    /// (see [`crate::beam`]). Elements without a section, shell sections with different
+    /// materials and unsupported beam section types are errors ([`GateError::InpBuild`]).
     ///
     /// ```
     /// use mitergate::inp::InpModel;
     /// let deck = "*NODE\n1,0,0,0\n2,1,0,0\n3,1,1,0\n4,0,1,0\n*ELEMENT,TYPE=S4R,ELSET=P\n1,1,2,3,4\n\
-    ///             *MATERIAL,NAME=STEEL\n*ELASTIC\n29e6,0.3\n*SHELL SECTION,ELSET=P,MATERIAL=STEEL\n0.5\n";
+    ///             *ELEMENT,TYPE=B31,ELSET=B\n2,1,2\n\
+    ///             *MATERIAL,NAME=STEEL\n*ELASTIC\n29e6,0.3\n*SHELL SECTION,ELSET=P,MATERIAL=STEEL\n0.5\n\
+    ///             *BEAM SECTION,ELSET=B,MATERIAL=STEEL,SECTION=RECT\n0.5,2.0\n0,1,0\n";
     /// let m = InpModel::parse(deck).unwrap().to_shell_mesh().unwrap();
     /// assert_eq!(m.mesh.elements[0].thickness, 0.5);
+    /// assert_eq!(m.beams[0].1.section_axes()[1], [0.0, 1.0, 0.0]);
     /// ```
     pub fn to_shell_mesh(&self) -> Result<ImportedMesh, GateError> {
         let index = self.node_index()?;
         let thickness = self.element_thickness()?;
-        let mut elements = Vec::with_capacity(self.elements.len());
-        let mut element_ids = Vec::with_capacity(self.elements.len());
+        let beam_sections = self.beam_section_of_elements()?;
+        let mut out = ImportedMesh {
+            mesh: ShellMesh {
+                nodes: self.nodes.iter().map(|n| n.1).collect(),
+                elements: Vec::with_capacity(self.elements.len()),
+            },
+            node_ids: self.nodes.iter().map(|n| n.0).collect(),
+            element_ids: Vec::with_capacity(self.elements.len()),
+            material: self.shell_material()?,
+            triangles: Vec::new(),
+            triangle_ids: Vec::new(),
+            beams: Vec::new(),
+            beam_ids: Vec::new(),
+        };
         for el in &self.elements {
-            match el.kind {
-                InpElementType::S4 | InpElementType::S4R => {}
-                InpElementType::S3 => {
-                    return Err(build_err(format!(
-                        "S3 element {} (line {}): triangle stiffness is not supported yet; mesh \
-                         the plates with S4/S4R quadrilaterals",
-                        el.id, el.line
-                    )));
-                }
-                InpElementType::B31 => {
-                    return Err(build_err(format!(
-                        "B31 element {} (line {}): B31 stiffness not supported yet",
-                        el.id, el.line
-                    )));
-                }
-            }
-            let mut nodes = [0; 4];
-            for (k, n) in el.nodes.iter().enumerate() {
-                nodes[k] = *index.get(n).ok_or_else(|| {
+            let nodes = el
+                .nodes
+                .iter()
+                .map(|n| {
+                    index.get(n).copied().ok_or_else(|| {
+                        build_err(format!(
+                            "element {} (line {}) uses undefined node {n}",
+                            el.id, el.line
+                        ))
+                    })
+                })
+                .collect::<Result<Vec<usize>, _>>()?;
+            if el.kind == InpElementType::B31 {
+                let s = beam_sections.get(&el.id).ok_or_else(|| {
                     build_err(format!(
-                        "element {} (line {}) uses undefined node {n}",
+                        "B31 element {} (line {}) is in no *BEAM SECTION element set",
                         el.id, el.line
                     ))
                 })?;
+                let beam = self.beam(el, s, [nodes[0], nodes[1]])?;
+                out.beams.push(([nodes[0], nodes[1]], beam));
+                out.beam_ids.push(el.id);
+                continue;
             }
             let t = *thickness.get(&el.id).ok_or_else(|| {
                 build_err(format!(
@@ -99,21 +131,94 @@ impl InpModel {
                     el.id, el.line
                 ))
             })?;
-            elements.push(QuadElement {
-                nodes,
-                thickness: t,
-            });
-            element_ids.push(el.id);
+            if el.kind == InpElementType::S3 {
+                out.triangles.push(([nodes[0], nodes[1], nodes[2]], t));
+                out.triangle_ids.push(el.id);
+            } else {
+                out.mesh.elements.push(QuadElement {
+                    nodes: [nodes[0], nodes[1], nodes[2], nodes[3]],
+                    thickness: t,
+                });
+                out.element_ids.push(el.id);
+            }
         }
-        Ok(ImportedMesh {
-            mesh: ShellMesh {
-                nodes: self.nodes.iter().map(|n| n.1).collect(),
-                elements,
+        Ok(out)
+    }
+
+    /// Beam section (index into `beam_sections`) of every element in a beam section's set.
+    fn beam_section_of_elements(&self) -> Result<HashMap<u64, usize>, GateError> {
+        let mut out = HashMap::new();
+        for (i, s) in self.beam_sections.iter().enumerate() {
+            let ids = self.elsets.get(&s.elset).ok_or_else(|| {
+                build_err(format!(
+                    "*BEAM SECTION (line {}) names undefined element set {}",
+                    s.line, s.elset
+                ))
+            })?;
+            for &e in ids {
+                if out.insert(e, i).is_some() {
+                    return Err(build_err(format!(
+                        "element {e} is in two beam sections (second: {}, line {})",
+                        s.elset, s.line
+                    )));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// The beam of a `B31` element from its section.
+    fn beam(
+        &self,
+        el: &super::InpElement,
+        section: &usize,
+        nodes: [usize; 2],
+    ) -> Result<Beam, GateError> {
+        let s = &self.beam_sections[*section];
+        let ctx = |reason: String| {
+            build_err(format!(
+                "B31 element {} (line {}), beam section of {} (line {}): {reason}",
+                el.id, el.line, s.elset, s.line
+            ))
+        };
+        let props = match s.section.as_str() {
+            "RECT" if s.data.len() >= 2 => BeamSectionProperties::rectangle(s.data[0], s.data[1]),
+            "GENERAL" if s.data.len() >= 5 => BeamSectionProperties::general(
+                s.data[0], s.data[1], s.data[2], s.data[3], s.data[4],
+            ),
+            "RECT" | "GENERAL" => {
+                return Err(ctx(format!(
+                    "SECTION={} needs {} numbers on its first data line, got {}",
+                    s.section,
+                    if s.section == "RECT" { 2 } else { 5 },
+                    s.data.len()
+                )));
+            }
+            other => {
+                return Err(ctx(format!(
+                    "SECTION={other} is not supported (RECT: a, b; GENERAL: A, I11, I12, I22, J)"
+                )));
+            }
+        }
+        .map_err(|e| ctx(e.to_string()))?;
+        let material = match s.moduli {
+            Some([e, g]) => BeamMaterial {
+                youngs_modulus: e,
+                shear_modulus: g,
             },
-            node_ids: self.nodes.iter().map(|n| n.0).collect(),
-            element_ids,
-            material: self.shell_material()?,
-        })
+            None => {
+                let m = self
+                    .materials
+                    .get(&s.material)
+                    .ok_or_else(|| ctx(format!("undefined material `{}`", s.material)))?;
+                let (e, nu) = m
+                    .elastic
+                    .ok_or_else(|| ctx(format!("material {} has no *ELASTIC", s.material)))?;
+                BeamMaterial::isotropic(e, nu)
+            }
+        };
+        let p = nodes.map(|n| self.nodes[n].1);
+        Beam::new(p[0], p[1], s.direction, props, material).map_err(|e| ctx(e.to_string()))
     }
 
     fn element_thickness(&self) -> Result<HashMap<u64, f64>, GateError> {
@@ -167,7 +272,16 @@ impl InpModel {
                 Some(_) => {}
             }
         }
-        let (e, nu, _) = found.ok_or_else(|| build_err("the deck has no *SHELL SECTION"))?;
+        let Some((e, nu, _)) = found else {
+            if self.beam_sections.is_empty() {
+                return Err(build_err("the deck has no *SHELL SECTION or *BEAM SECTION"));
+            }
+            // beams only: the shell material is never used
+            return Ok(ShellMaterial {
+                youngs_modulus: 1.0,
+                poisson_ratio: 0.0,
+            });
+        };
         if !(e > 0.0 && nu > -1.0 && nu < 0.5) {
             return Err(build_err(format!(
                 "material constants E = {e}, nu = {nu} are not admissible"
@@ -392,11 +506,60 @@ impl InpModel {
     pub fn build(&self, drilling_penalty: f64) -> Result<ImportedModel, GateError> {
         let mesh = self.to_shell_mesh()?;
         let supports = self.supports(0)?;
-        let model =
-            ShellModel::build(mesh.mesh.clone(), mesh.material, drilling_penalty, supports)?;
+        let triangles = mesh
+            .triangles
+            .iter()
+            .zip(&mesh.triangle_ids)
+            .map(|(&(nodes, t), id)| {
+                ShellTriangle::new(
+                    &nodes.map(|n| mesh.mesh.nodes[n]),
+                    t,
+                    mesh.material,
+                    drilling_penalty,
+                )
+                .map_err(|e| build_err(format!("S3 element {id}: {e}")))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut general = Vec::with_capacity(triangles.len() + mesh.beams.len());
+        for (tri, &(nodes, _)) in triangles.iter().zip(&mesh.triangles) {
+            let k = tri.stiffness();
+            general.push(GeneralElement::new(
+                nodes.to_vec(),
+                DMatrix::from_iterator(18, 18, k.iter().copied()),
+            )?);
+        }
+        for (nodes, beam) in &mesh.beams {
+            let k = beam.stiffness();
+            general.push(GeneralElement::new(
+                nodes.to_vec(),
+                DMatrix::from_iterator(12, 12, k.iter().copied()),
+            )?);
+        }
+        let model = ShellModel::build_with_elements(
+            mesh.mesh.clone(),
+            mesh.material,
+            drilling_penalty,
+            supports,
+            general,
+        )?;
+        let triangle_index = mesh
+            .triangle_ids
+            .iter()
+            .enumerate()
+            .map(|(e, &id)| (id, e))
+            .collect();
+        let element_index = mesh
+            .element_ids
+            .iter()
+            .enumerate()
+            .map(|(e, &id)| (id, e))
+            .collect();
         Ok(ImportedModel {
             deck: self.clone(),
             index: self.node_index()?,
+            element_index,
+            triangles,
+            triangle_index,
             mesh,
             model,
         })
@@ -504,8 +667,9 @@ impl ImportedModel {
         self.model.solve(f)
     }
 
-    /// Shell elements containing a gauge point on their mid-plane, with normal parallel to
-    /// `side`: `(element index, ξ, η, ζ)` with `ζ = ±t/2` the instrumented face.
+    /// Quadrilaterals containing a gauge point on their mid-plane, with normal parallel to
+    /// `side`: `(element index, ξ, η, ζ)` with `ζ = ±t/2` the instrumented face (used by the
+    /// CalculiX comparison, which interpolates CalculiX's nodal strains on the same sites).
     pub(crate) fn gauge_sites(
         &self,
         point: [f64; 3],
@@ -524,6 +688,49 @@ impl ImportedModel {
                 continue;
             }
             out.push((e, xi, eta, 0.5 * quad.thickness() * along.signum()));
+        }
+        out
+    }
+
+    /// Shell elements (quadrilaterals and triangles) containing a gauge point on their
+    /// mid-plane, with normal parallel to `side`, as `(deck id, element dofs, strain operator)` of the instrumented face
+    /// `ζ = ±t/2` along `direction`.
+    fn gauge_site_operators(
+        &self,
+        point: [f64; 3],
+        side: [f64; 3],
+        direction: [f64; 3],
+    ) -> Vec<(u64, Vec<usize>, Vec<f64>)> {
+        let mut out = Vec::new();
+        for (e, xi, eta, zeta) in self.gauge_sites(point, side) {
+            let op = self.model.quads()[e].strain_operator(xi, eta, zeta, direction);
+            let dofs = element_dofs(&self.mesh.mesh.elements[e]).to_vec();
+            out.push((self.mesh.element_ids[e], dofs, op.iter().copied().collect()));
+        }
+        let s = Vector3::from(side).normalize();
+        for (e, tri) in self.triangles.iter().enumerate() {
+            let along = Vector3::from(tri.normal()).dot(&s);
+            if along.abs() < 0.99 {
+                continue;
+            }
+            let (l2, l3, dist) = tri.natural_coordinates(point);
+            let size = tri.area().sqrt();
+            let tol = 1e-9;
+            if dist.abs() > 1e-6 * size || l2 < -tol || l3 < -tol || l2 + l3 > 1.0 + tol {
+                continue;
+            }
+            let zeta = 0.5 * tri.thickness() * along.signum();
+            let op = tri.strain_operator(l2, l3, zeta, direction);
+            let nodes = self.mesh.triangles[e].0;
+            let dofs = nodes
+                .iter()
+                .flat_map(|&n| (0..6).map(move |k| 6 * n + k))
+                .collect();
+            out.push((
+                self.mesh.triangle_ids[e],
+                dofs,
+                op.iter().copied().collect(),
+            ));
         }
         out
     }
@@ -549,21 +756,48 @@ impl ImportedModel {
         side: [f64; 3],
         direction: [f64; 3],
     ) -> Result<Vec<(usize, f64)>, GateError> {
-        let sites = self.gauge_sites(point, side);
-        if sites.is_empty() {
-            return Err(GateError::GaugeNotOnMesh {
+        self.gauge_operator_in(point, side, direction, None)
+            .ok_or(GateError::GaugeNotOnMesh {
                 name: "imported gauge".into(),
                 point,
                 side,
-            });
+            })
+    }
+
+    /// [`ImportedModel::gauge_strain_operator`] restricted to the elements whose deck ids are
+    /// in `allowed` (all shell elements if `None`); `None` if no element carries the point.
+    pub(crate) fn gauge_operator_in(
+        &self,
+        point: [f64; 3],
+        side: [f64; 3],
+        direction: [f64; 3],
+        allowed: Option<&HashSet<u64>>,
+    ) -> Option<Vec<(usize, f64)>> {
+        let sites: Vec<_> = self
+            .gauge_site_operators(point, side, direction)
+            .into_iter()
+            .filter(|s| allowed.is_none_or(|a| a.contains(&s.0)))
+            .collect();
+        if sites.is_empty() {
+            return None;
         }
         let mut acc: BTreeMap<usize, f64> = BTreeMap::new();
-        for &(e, xi, eta, zeta) in &sites {
-            let op = self.model.quads()[e].strain_operator(xi, eta, zeta, direction);
-            for (a, &dof) in element_dofs(&self.mesh.mesh.elements[e]).iter().enumerate() {
-                *acc.entry(dof).or_insert(0.0) += op[a] / sites.len() as f64;
+        for (_, dofs, op) in &sites {
+            for (&dof, c) in dofs.iter().zip(op) {
+                *acc.entry(dof).or_insert(0.0) += c / sites.len() as f64;
             }
         }
-        Ok(acc.into_iter().collect())
+        Some(acc.into_iter().collect())
+    }
+
+    /// Node indices and unit normal of the shell element with deck id `id`.
+    pub(crate) fn shell_face(&self, id: u64) -> Option<(Vec<usize>, Vector3<f64>)> {
+        if let Some(&e) = self.element_index.get(&id) {
+            let normal = Vector3::from(self.model.quads()[e].normal());
+            return Some((self.mesh.mesh.elements[e].nodes.to_vec(), normal));
+        }
+        let e = *self.triangle_index.get(&id)?;
+        let normal = Vector3::from(self.triangles[e].normal());
+        Some((self.mesh.triangles[e].0.to_vec(), normal))
     }
 }

@@ -1,5 +1,5 @@
 //! Abaqus / CalculiX input decks (`.inp`): export of the gate model, import of a user's shell
-//! model, and the build of an imported deck into a supported, factored [`ShellModel`].
+//! model, and the build of an imported deck into a supported, factored [`ShellModel`](crate::fe::ShellModel).
 //!
 //! # Export
 //!
@@ -31,6 +31,7 @@
 //! | `*MATERIAL`, `*ELASTIC`, `*DENSITY` | `NAME`; `TYPE=ISOTROPIC` | [`InpMaterial`] |
 //! | `*SHELL SECTION` | `ELSET`, `MATERIAL` | [`ShellSection`] (thickness) |
 //! | `*BEAM SECTION` | `ELSET`, `MATERIAL`, `SECTION` | [`BeamSection`] (dimensions, direction) |
+//! | `*BEAM GENERAL SECTION` | `ELSET`, `SECTION` (default `GENERAL`), `MATERIAL` | [`BeamSection`] (`A, I11, I12, I22, J`, direction, `E, G`) |
 //! | `*BOUNDARY` | | [`Boundary`] (`ENCASTRE`, `PINNED` or DOF ranges, value 0) |
 //! | `*TRANSFORM` | `NSET`, `TYPE=R` | [`Transform`] |
 //! | `*EQUATION` | | [`Equation`] |
@@ -40,25 +41,31 @@
 //! Keywords and parameters are case-insensitive; set and material names are upper-cased (Abaqus
 //! names are case-insensitive). `**` starts a comment line. A keyword line ending in a comma
 //! continues on the next line; `*ELEMENT` data lines continue until the element has all its
-//! nodes. Any other keyword is a [`GateError::InpParse`] naming the line and the keyword.
+//! nodes. Any other keyword is a [`GateError::InpParse`](crate::GateError::InpParse) naming the line and the keyword.
 //!
 //! # Building a stiffness model from a deck
 //!
 //! [`InpModel::build`] turns the deck into an [`ImportedModel`]: `S4` and `S4R` elements become
 //! our flat shell quadrilateral (QM6 membrane + MITC4 bending, fully integrated: `S4R`'s reduced
-//! integration and hourglass control are not reproduced); all shell sections must use one
-//! isotropic material. `S3` triangles and `B31` beams are read and kept in the [`InpModel`]
-//! but the build refuses them with a clear [`GateError::InpBuild`] (no triangle or beam
-//! element yet). Supports come from `*BOUNDARY` (homogeneous only), `*TRANSFORM` (one local
-//! translation fixed = a skewed roller; all three = fixed) and `*EQUATION` (`a ux + b uy + c uz
-//! = 0` of one node = a roller with normal `(a, b, c)`). Loads of a step come from `*CLOAD`
-//! (in the local frame of transformed nodes, as in Abaqus).
+//! integration and hourglass control are not reproduced); `S3` elements the flat triangle of
+//! [`crate::tri`] (Allman membrane with drilling rotations + DKT bending); `B31` elements the
+//! two-node Timoshenko beam of [`crate::beam`] (sections `RECT` and `GENERAL`, Abaqus's axis
+//! convention), all assembled into one sparse system. All shell sections must use one
+//! isotropic material. Supports come from `*BOUNDARY` (homogeneous only), `*TRANSFORM` (one
+//! local translation fixed = a skewed roller; all three = fixed) and `*EQUATION` (`a ux + b uy
+//! + c uz = 0` of one node = a roller with normal `(a, b, c)`). Loads of a step come from
+//! `*CLOAD` (in the local frame of transformed nodes, as in Abaqus).
 //!
-//! To use your own gate, name in the deck: the node set `QUOIN` (the quoin contact line, the
-//! nodes where the contact forces act), the supports (pintle, gudgeon, miter bearing) with
-//! `*BOUNDARY` / `*TRANSFORM` / `*EQUATION`, and give each gauge as a point on a plate surface
-//! ([`ImportedModel::gauge_strain_operator`]); the water load is the `*CLOAD` of a step or any
-//! load vector you assemble.
+//! # Condensing a deck: bring your own gate
+//!
+//! [`ImportedModel::condense`] (or [`crate::condensed::CondensedGate::from_inp_str`]) reduces
+//! the deck to the same [`crate::condensed::CondensedGate`] as [`crate::GateModel::condense`],
+//! through the same code. What the deck cannot say is given by an [`ImportSpec`] (builder or
+//! TOML sidecar): the quoin node set (default `QUOIN`), the skin element set carrying the
+//! water (default `SKIN`), the vertical and the sill, the quoin normal `n` (from the wall into
+//! the gate) and the downstream side (which fixes `t`), and the gauges (point, face,
+//! direction, optional element set). The defaults are the names and the frame the exporter
+//! writes, so [`ImportSpec::for_exported_gate`] is all an exported deck needs.
 //!
 //! ```
 //! use mitergate::inp::{export_gate, ExportOptions, InpModel};
@@ -72,10 +79,12 @@
 //! ```
 
 mod build;
+mod condense;
 pub(crate) mod export;
 mod parse;
 
 pub use build::{ImportedMesh, ImportedModel};
+pub use condense::{Frame, ImportGauge, ImportSpec};
 pub use export::{ExportOptions, MiterConstraint, export_gate};
 
 use serde::{Deserialize, Serialize};
@@ -168,12 +177,13 @@ pub struct ShellSection {
     pub line: usize,
 }
 
-/// A `*BEAM SECTION` (stored for completeness; beams are not built yet).
+/// A `*BEAM SECTION` or `*BEAM GENERAL SECTION` (see [`crate::beam`] for the axes and the
+/// supported section types).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BeamSection {
     /// Element set (upper case).
     pub elset: String,
-    /// Material name (upper case).
+    /// Material name (upper case; empty when a `*BEAM GENERAL SECTION` gives its moduli).
     pub material: String,
     /// Section type (`RECT`, `CIRC`, `PIPE`, `BOX`, `I`, `GENERAL`, ...; upper case).
     pub section: String,
@@ -181,6 +191,10 @@ pub struct BeamSection {
     pub data: Vec<f64>,
     /// Second data line: the direction of the first section axis, if given.
     pub direction: Option<[f64; 3]>,
+    /// Third data line of a `*BEAM GENERAL SECTION`: `E, G` (psi).
+    pub moduli: Option<[f64; 2]>,
+    /// Defined by `*BEAM GENERAL SECTION` (else `*BEAM SECTION`).
+    pub general_keyword: bool,
     /// Line of the keyword (1-based).
     pub line: usize,
 }

@@ -317,6 +317,23 @@ impl Parser {
                     section: required(params, "SECTION", name, line)?,
                     data: Vec::new(),
                     direction: None,
+                    moduli: None,
+                    general_keyword: false,
+                    line,
+                });
+                Block::BeamSection(self.model.beam_sections.len() - 1, 0)
+            }
+            "BEAM GENERAL SECTION" => {
+                self.model.beam_sections.push(BeamSection {
+                    elset: required(params, "ELSET", name, line)?,
+                    material: param(params, "MATERIAL")
+                        .map(str::to_uppercase)
+                        .unwrap_or_default(),
+                    section: param(params, "SECTION").unwrap_or("GENERAL").to_uppercase(),
+                    data: Vec::new(),
+                    direction: None,
+                    moduli: None,
+                    general_keyword: true,
                     line,
                 });
                 Block::BeamSection(self.model.beam_sections.len() - 1, 0)
@@ -461,6 +478,18 @@ impl Parser {
                     0 => s.data = vals,
                     1 if vals.len() == 3 => s.direction = Some([vals[0], vals[1], vals[2]]),
                     1 => return Err(err(line, "beam section direction needs 3 components")),
+                    2 if s.general_keyword && vals.len() >= 2 => {
+                        s.moduli = Some([vals[0], vals[1]]);
+                    }
+                    2 if s.general_keyword => {
+                        return Err(err(line, "*BEAM GENERAL SECTION moduli line needs E, G"));
+                    }
+                    _ if s.general_keyword => {
+                        return Err(err(
+                            line,
+                            "*BEAM GENERAL SECTION takes at most 3 data lines here",
+                        ));
+                    }
                     _ => return Err(err(line, "*BEAM SECTION takes at most 2 data lines")),
                 }
                 *count += 1;

@@ -83,7 +83,6 @@ fn strain_model_is_eq_47() {
 }
 
 #[test]
-#[ignore = "needs orthopoly's Legendre basis (another crate, not in this worktree yet)"]
 fn the_gate_assembles_into_a_multi_level_model() {
     let gate = model().gate();
     let basis =

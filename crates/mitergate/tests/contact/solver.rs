@@ -286,3 +286,60 @@ fn iteration_caps_return_errors() {
             .is_ok()
     );
 }
+
+#[test]
+fn warm_starts_along_a_theta_sweep_agree_with_cold_solves() {
+    let m = model();
+    let x = [650.0, 120.0];
+    let mut previous = m.solve(x[0], x[1], 80.0).unwrap();
+    let (mut warm_its, mut cold_its) = (0, 0);
+    for k in 1..=12 {
+        let theta = 80.0 + 2.5 * k as f64;
+        let warm = m.solve_from(x[0], x[1], theta, &previous).unwrap();
+        let cold = m.solve(x[0], x[1], theta).unwrap();
+        // Both meet the same test (active set exact, tangential law to 1e-8 of max |F|), so
+        // they agree to a few times that tolerance relative to the largest force.
+        let scale = max_abs(&cold.forces);
+        let diff = warm
+            .forces
+            .iter()
+            .zip(&cold.forces)
+            .fold(0.0f64, |a, (w, c)| a.max((w - c).abs()));
+        assert!(
+            diff <= 1e-6 * scale,
+            "θ = {theta}: warm/cold differ by {diff:e}"
+        );
+        let r = law_residuals(m, &warm, x, theta);
+        assert!(
+            r[0] < 1e-8 && r[1] < 1e-8 && r[2] < 1e-8 && r[3] < 2e-8,
+            "{r:?}"
+        );
+        warm_its += warm.iterations;
+        cold_its += cold.iterations;
+        previous = warm;
+    }
+    // A neighbouring solution is a better start than the rigid-quoin guess.
+    assert!(
+        warm_its < cold_its,
+        "warm {warm_its} vs cold {cold_its} iterations"
+    );
+}
+
+#[test]
+fn warm_start_rejects_a_solution_of_another_size() {
+    let m = model();
+    let wrong = ContactSolution {
+        forces: vec![0.0; 4],
+        node_displacement: vec![],
+        n_active: 0,
+        iterations: 0,
+        tangential_residual: 0.0,
+    };
+    assert!(matches!(
+        m.solve_from(600.0, 100.0, 90.0, &wrong),
+        Err(GateError::ContactDimension {
+            what: "previous.forces",
+            ..
+        })
+    ));
+}

@@ -111,7 +111,7 @@ fn navier_center_moment_sum(a: f64, q: f64) -> f64 {
     16.0 * q * a * a / std::f64::consts::PI.powi(4) * s
 }
 
-fn navier_center_deflection(a: f64, q: f64, d: f64) -> f64 {
+pub fn navier_center_deflection(a: f64, q: f64, d: f64) -> f64 {
     // Navier double series for the centre of a simply supported square plate
     let mut s = 0.0;
     for m in (1..200).step_by(2) {

@@ -1,5 +1,6 @@
+mod beam_tri;
 pub mod common;
 mod config;
-mod element;
+pub mod element;
 mod gate;
 mod inp;
