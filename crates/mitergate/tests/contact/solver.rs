@@ -343,3 +343,31 @@ fn warm_start_rejects_a_solution_of_another_size() {
         })
     ));
 }
+
+/// Inputs on the real gate (24 in mesh) where earlier versions of the solver struggled: the
+/// plain tangential fixed point needed 86 iterations at the first, and alternating it with
+/// Newton steps cycled at the second (a contact edge moving back and forth). All must converge
+/// and satisfy the contact laws.
+#[test]
+fn hard_inputs_on_the_real_gate_converge() {
+    let mut cfg = mitergate::GateConfig::default();
+    cfg.mesh.element_size = 24.0;
+    let gate = mitergate::GateModel::build(&cfg)
+        .and_then(|m| m.condense(mitergate::DEFAULT_NU))
+        .unwrap();
+    let m = ContactParams::default().build(gate).unwrap();
+    for (x, theta) in [
+        ([550.0, 318.0], 164.0),
+        ([542.3278, 185.0065], 119.4739918176505),
+        ([544.0, 183.0], 120.0),
+    ] {
+        let sol = m.solve(x[0], x[1], theta).unwrap();
+        let r = law_residuals(&m, &sol, x, theta);
+        // The tolerances of `solutions_satisfy_the_contact_laws` (same convergence test).
+        assert!(
+            r[0] < 1e-8 && r[1] < 1e-8 && r[2] < 1e-8,
+            "{r:?} at {x:?}, θ = {theta}"
+        );
+        assert!(r[3] < 2e-8, "tangential law {r:?} at {x:?}, θ = {theta}");
+    }
+}
