@@ -269,6 +269,23 @@ fn draw_rho_alpha(rng: &mut StdRng, rule: &SamplingRule, half: &[f64]) -> (f64, 
     (rho, alpha)
 }
 
+/// The `pool` distinct inputs `x` of a training set: `bounds` checked against the model, then
+/// drawn with a seed derived from `seed` (the per-`x` draws use the other derived seeds).
+fn input_pool<U: UnobservableModel, O>(
+    model: &MultiLevelModel<U, O>,
+    bounds: &[(f64, f64)],
+    pool: usize,
+    seed: u64,
+) -> Result<Vec<Vec<f64>>> {
+    check_bounds(model, bounds)?;
+    draw_pool(
+        &model.unobservable,
+        bounds,
+        pool,
+        derive_seed(seed, u64::MAX),
+    )
+}
+
 /// Checks `bounds` against the model's input dimension.
 fn check_bounds<U: UnobservableModel, O>(
     model: &MultiLevelModel<U, O>,
@@ -301,15 +318,9 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    check_bounds(model, bounds)?;
     let per = rule.draws_per_x;
-    let pool = n.div_ceil(per);
-    let xs = draw_pool(
-        &model.unobservable,
-        bounds,
-        pool,
-        derive_seed(seed, u64::MAX),
-    )?;
+    let xs = input_pool(model, bounds, n.div_ceil(per), seed)?;
+    let pool = xs.len();
     let pb = progress_bar(pool as u64, "Module 2: training set", progress);
     let rows: Vec<Vec<Sample>> = xs
         .par_iter()
@@ -356,15 +367,9 @@ where
     U: UnobservableModel,
     O: ObservableModel,
 {
-    check_bounds(model, bounds)?;
     let per = rule.draws_per_x;
-    let pool = n.div_ceil(per);
-    let xs = draw_pool(
-        &model.unobservable,
-        bounds,
-        pool,
-        derive_seed(seed, u64::MAX),
-    )?;
+    let xs = input_pool(model, bounds, n.div_ceil(per), seed)?;
+    let pool = xs.len();
     let n_u = model.unobservable.response_len();
     let n_o = model.observable.output_dim();
     let pb = progress_bar(pool as u64, "Module 2: training set", progress);

@@ -383,12 +383,7 @@ impl ShellQuad {
 
     /// Transformation `T` (24×24) from global to local element DOFs.
     fn transformation(&self) -> Mat24 {
-        let mut t = Mat24::zeros();
-        for blk in 0..8 {
-            t.fixed_view_mut::<3, 3>(3 * blk, 3 * blk)
-                .copy_from(&self.axes);
-        }
-        t
+        block_rotation(&self.axes)
     }
 
     /// Global stiffness (24×24, DOFs per node `[ux, uy, uz, rx, ry, rz]`), `Tᵀ K_local T`.
@@ -496,4 +491,14 @@ fn gauss_points() -> impl Iterator<Item = (f64, f64, f64)> {
     ]
     .into_iter()
     .map(|(a, b)| (a, b, 1.0))
+}
+
+/// The `N x N` (`N` a multiple of 3) block-diagonal matrix with the rotation `axes` (rows = local
+/// axes in global coordinates) on every 3 x 3 diagonal block: global to local element DOFs.
+pub(crate) fn block_rotation<const N: usize>(axes: &Matrix3<f64>) -> SMatrix<f64, N, N> {
+    let mut t = SMatrix::<f64, N, N>::zeros();
+    for blk in 0..N / 3 {
+        t.fixed_view_mut::<3, 3>(3 * blk, 3 * blk).copy_from(axes);
+    }
+    t
 }

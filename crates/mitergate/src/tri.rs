@@ -289,12 +289,7 @@ impl ShellTriangle {
     }
 
     fn transformation(&self) -> Mat18 {
-        let mut t = Mat18::zeros();
-        for blk in 0..6 {
-            t.fixed_view_mut::<3, 3>(3 * blk, 3 * blk)
-                .copy_from(&self.axes);
-        }
-        t
+        crate::shell::block_rotation(&self.axes)
     }
 
     /// Global stiffness (18×18, DOFs per node `[ux, uy, uz, rx, ry, rz]`).
