@@ -1,6 +1,7 @@
 //! The orchestration of Modules 2-4 ([`calibrate`]) and the calibrated model ([`Calibration`]).
 
-use crate::config::{CalibrationConfig, EstimatorConfig};
+use crate::conditional::{ConditionalCoefficients, ModelRows, RhoProfile};
+use crate::config::{CalibrationConfig, CoefficientMode, EstimatorConfig};
 use crate::error::{BamudiError, Result};
 use crate::estimator::{
     CoefficientEstimator, ExactLinearEstimator, FittedEstimator, LstmEstimator, LstmSettings,
@@ -125,6 +126,16 @@ pub struct Calibration {
     pub x_experiments: DMatrix<f64>,
     /// The coefficient GPs (Eq. 33-37).
     pub gps: CoefficientGps,
+    /// [`CoefficientMode::ConditionalOnTheta`] only: smoother weights (`N_e x K`, see
+    /// [`ConditionalCoefficients::weights`]) of the posterior-averaged coefficient change
+    /// `E_θ[α̂(θ)] − α̂`; the GP mean at `x` becomes `μ_k(x) + Σ_k(x, X) w_k`. `alpha_hat`
+    /// then holds `E_θ[α̂(θ)]`.
+    #[serde(default)]
+    pub alpha_correction: Option<DMatrix<f64>>,
+    /// [`CoefficientMode::ConditionalOnTheta`] only: the profile search that set `rho.rho_star`
+    /// (the Eq.-30 value is kept inside it).
+    #[serde(default)]
+    pub rho_profile: Option<RhoProfile>,
     /// `σ_ε` used in Module 3.
     pub sigma_eps: f64,
     /// Whether `σ_ε` was estimated (see [`estimate_sigma`]) rather than configured.
@@ -334,44 +345,94 @@ where
     // Module 2b: ρ*, α̂, GPs
     let t = Instant::now();
     let ctx = contexts(model, &parts, &theta_rule, cfg, &exps.x)?;
-    let rho = estimate_rho(&estimator, &exps.x, &exps.y, &ctx, &parts, &cfg.rho)?;
-    let alpha_hat = estimator.predict(rho.rho_star, &exps.x, &exps.y, &ctx)?;
+    let mut rho = estimate_rho(&estimator, &exps.x, &exps.y, &ctx, &parts, &cfg.rho)?;
+    let mut alpha_hat = estimator.predict(rho.rho_star, &exps.x, &exps.y, &ctx)?;
     timings.rho_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let gps = CoefficientGps::fit(
-        &exps.x,
-        &alpha_hat,
-        cfg.gp_restarts,
-        derive_seed(cfg.seed, 3),
-    )?;
+    let fit_gps = |alpha: &DMatrix<f64>| {
+        CoefficientGps::fit(&exps.x, alpha, cfg.gp_restarts, derive_seed(cfg.seed, 3))
+    };
+    let mut gps = fit_gps(&alpha_hat)?;
     timings.gp_s = t.elapsed().as_secs_f64();
+    let mut gp_moments = GpMoments::of(&gps, &exps.x)?;
+
+    // Conditional mode: ρ by the profile search, then the GPs refitted to α̂(ρ*, θ̂)
+    let mut rho_profile = None;
+    let mut candidate_rows = Vec::new();
+    if cfg.coefficients == CoefficientMode::ConditionalOnTheta {
+        let t = Instant::now();
+        candidate_rows = sigma_candidates(model, cfg)
+            .par_iter()
+            .map(|theta| model_rows(model, exps, &parts, theta))
+            .collect::<Result<Vec<_>>>()?;
+        let cc = gp_moments.conditional(&estimator, &ctx, exps, &alpha_hat)?;
+        let profile = cc.profile_rho(&candidate_rows, &parts.b, &cfg.rho, rho.rho_star)?;
+        let best = candidate_rows
+            .iter()
+            .find(|r| r.theta == profile.theta_star)
+            .ok_or_else(|| BamudiError::Numerical {
+                context: "rho profile".into(),
+                reason: "best theta candidate not found".into(),
+            })?;
+        let base = cc.alpha(profile.rho_star, &best.ag, &best.b)?;
+        timings.rho_s += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        gps = fit_gps(&base)?;
+        timings.gp_s += t.elapsed().as_secs_f64();
+        gp_moments = GpMoments::of(&gps, &exps.x)?;
+        alpha_hat = base;
+        rho.rho_star = profile.rho_star;
+        rho_profile = Some(profile);
+    }
 
     // Module 3
     let t = Instant::now();
-    let (mu_alpha, _) = gps.predict(&exps.x)?;
-    let (sigma_eps, sigma_eps_estimated) = match cfg.sigma_eps {
-        Some(s) => (s, false),
-        None => (
-            estimate_sigma(&exps.y, rho.rho_star, &ctx, &parts, &mu_alpha),
+    let conditional = match cfg.coefficients {
+        CoefficientMode::PriorMarginal => None,
+        CoefficientMode::ConditionalOnTheta => {
+            Some(gp_moments.conditional(&estimator, &ctx, exps, &alpha_hat)?)
+        }
+    };
+    let (sigma_eps, sigma_eps_estimated) = match (cfg.sigma_eps, &conditional) {
+        (Some(s), _) => (s, false),
+        (None, None) => (
+            estimate_sigma(&exps.y, rho.rho_star, &ctx, &parts, &gp_moments.mean),
+            true,
+        ),
+        (None, Some(cc)) => (
+            cc.best_theta(rho.rho_star, &candidate_rows, &parts.b)?.0,
             true,
         ),
     };
-    let covs = (0..gps.len())
-        .map(|k| gps.covariance(k, &exps.x, &exps.x))
-        .collect::<Result<Vec<_>>>()?;
-    let v = assemble_covariance(&parts.b, &covs, sigma_eps * sigma_eps)?;
+    drop(candidate_rows);
+    let v = assemble_covariance(&parts.b, &gp_moments.covs, sigma_eps * sigma_eps)?;
     let factor = FactoredCovariance::new(v, "Eq. 51 covariance V")?;
-    let shift = &mu_alpha * parts.b.transpose(); // B μ_α(x_i), row i
     let lik = ThetaLikelihood {
-        model,
-        exps,
-        parts: &parts,
-        rho: rho.rho_star,
-        shift: &shift,
+        res: ThetaResiduals {
+            model,
+            exps,
+            parts: &parts,
+            rho: rho.rho_star,
+            shift: &gp_moments.mean * parts.b.transpose(), // B μ_α(x_i), row i
+            conditional: conditional.as_ref(),
+        },
         factor: &factor,
         sigma2: sigma_eps * sigma_eps,
     };
     let (posterior, posterior_no_discrepancy) = lik.posteriors(cfg)?;
+    let mean_delta = match &conditional {
+        None => None,
+        Some(_) => Some(lik.res.posterior_mean_delta(&posterior)?),
+    };
+    drop(lik);
+    drop(conditional);
+    let alpha_correction = match mean_delta {
+        None => None,
+        Some(d) => {
+            alpha_hat += &d;
+            Some(ConditionalCoefficients::weights(&d, &gp_moments.noise_var))
+        }
+    };
     timings.module3_s = t.elapsed().as_secs_f64();
 
     Ok(Calibration {
@@ -387,6 +448,8 @@ where
         alpha_hat,
         x_experiments: exps.x.clone(),
         gps,
+        alpha_correction,
+        rho_profile,
         sigma_eps,
         sigma_eps_estimated,
         covariance: factor.report(),
@@ -396,8 +459,8 @@ where
     })
 }
 
-/// Everything the Module-3 log densities need.
-pub struct ThetaLikelihood<'a, U, O> {
+/// Residuals of the Module-3 mean (Eq. 50) against the data at a candidate `θ`.
+pub struct ThetaResiduals<'a, U, O> {
     /// The model.
     pub model: &'a MultiLevelModel<U, O>,
     /// The data.
@@ -406,8 +469,154 @@ pub struct ThetaLikelihood<'a, U, O> {
     pub parts: &'a LinearParts,
     /// `ρ*`.
     pub rho: f64,
-    /// `B μ_α(x_i)` per experiment (`N_e x N_o`).
-    pub shift: &'a DMatrix<f64>,
+    /// `B μ_α(x_i)` per experiment (`N_e x N_o`) from the Module-2 GPs.
+    pub shift: DMatrix<f64>,
+    /// Present in [`CoefficientMode::ConditionalOnTheta`]: re-estimates `α` at each `θ`.
+    pub conditional: Option<&'a ConditionalCoefficients<'a>>,
+}
+
+impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, U, O> {
+    /// `α̂(θ) − α̂` at the experiments (zero rows without the conditional mode).
+    fn delta(&self, theta: &[f64]) -> Result<Option<DMatrix<f64>>> {
+        match self.conditional {
+            None => Ok(None),
+            Some(c) => {
+                let rows = model_rows(self.model, self.exps, self.parts, theta)?;
+                c.delta(self.rho, &rows.ag, &rows.b).map(Some)
+            }
+        }
+    }
+
+    /// Stacked residuals `y − E_o(θ)` with (Eq. 41/50) and without discrepancy (`ρ = 1`, `δ = 0`).
+    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (n_e, n_o) = (self.exps.len(), self.exps.y.ncols());
+        let ModelRows { ag, b, .. } = model_rows(self.model, self.exps, self.parts, theta)?;
+        let extra = match self.conditional {
+            None => None,
+            Some(c) => Some(c.smooth(&c.delta(self.rho, &ag, &b)?) * self.parts.b.transpose()),
+        };
+        let mut with = Vec::with_capacity(n_e * n_o);
+        let mut without = Vec::with_capacity(n_e * n_o);
+        for i in 0..n_e {
+            for p in 0..n_o {
+                let y = self.exps.y[(i, p)];
+                let shift = self.shift[(i, p)] + extra.as_ref().map_or(0.0, |e| e[(i, p)]);
+                with.push(y - (self.rho * ag[(i, p)] + b[(i, p)] + shift));
+                without.push(y - (ag[(i, p)] + b[(i, p)]));
+            }
+        }
+        Ok((with, without))
+    }
+
+    /// `E_θ[α̂(θ)] − α̂` over the posterior support (at most 50 points for MCMC).
+    fn posterior_mean_delta(&self, posterior: &ThetaPosterior) -> Result<DMatrix<f64>> {
+        let support = posterior.support(50);
+        let parts = support
+            .par_iter()
+            .map(|(theta, w)| Ok(self.delta(theta)?.map(|d| d * *w)))
+            .collect::<Result<Vec<_>>>()?;
+        let k = self.parts.b.ncols();
+        Ok(parts
+            .into_iter()
+            .flatten()
+            .fold(DMatrix::zeros(self.exps.len(), k), |acc, d| acc + d))
+    }
+}
+
+/// `A g_u(x_i, θ)` and `b(x_i, θ)` at every experiment (`N_e x N_o` each).
+fn model_rows<U: UnobservableModel, O: LinearObservableModel>(
+    model: &MultiLevelModel<U, O>,
+    exps: &Experiments,
+    parts: &LinearParts,
+    theta: &[f64],
+) -> Result<ModelRows> {
+    let (n_e, n_o) = (exps.len(), exps.y.ncols());
+    let mut g = vec![0.0; model.unobservable.response_len()];
+    let mut b = vec![0.0; n_o];
+    let mut rows = ModelRows {
+        theta: theta.to_vec(),
+        ag: DMatrix::zeros(n_e, n_o),
+        b: DMatrix::zeros(n_e, n_o),
+    };
+    for i in 0..n_e {
+        let x = x_row(&exps.x, i);
+        model.unobservable.evaluate(&x, theta, &mut g)?;
+        model.observable.offset(&x, theta, &mut b)?;
+        let ag = &parts.a * nalgebra::DVector::from_column_slice(&g);
+        rows.ag.set_row(i, &ag.transpose());
+        rows.b.set_row(i, &nalgebra::RowDVector::from_row_slice(&b));
+    }
+    Ok(rows)
+}
+
+/// The coefficient GPs' means, latent covariances and noise variances at the experiments.
+struct GpMoments {
+    mean: DMatrix<f64>,
+    covs: Vec<DMatrix<f64>>,
+    noise_var: Vec<f64>,
+}
+
+impl GpMoments {
+    fn of(gps: &CoefficientGps, x: &DMatrix<f64>) -> Result<Self> {
+        let (mean, _) = gps.predict(x)?;
+        let covs = (0..gps.len())
+            .map(|k| gps.covariance(k, x, x))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            mean,
+            covs,
+            noise_var: gps.noise_variances(),
+        })
+    }
+
+    /// The conditional-mode coefficient model over these GPs fitted to `alpha_hat`.
+    fn conditional<'a>(
+        &self,
+        estimator: &'a FittedEstimator,
+        ctx: &'a [XContext],
+        exps: &'a Experiments,
+        alpha_hat: &'a DMatrix<f64>,
+    ) -> Result<ConditionalCoefficients<'a>> {
+        ConditionalCoefficients::new(
+            estimator,
+            ctx,
+            &exps.x,
+            &exps.y,
+            alpha_hat,
+            &self.mean,
+            &self.covs,
+            &self.noise_var,
+        )
+    }
+}
+
+/// Candidate `θ` values for the conditional-mode `σ_ε` estimate: the coarse grid of the
+/// one-dimensional posterior, or 16 prior draws.
+fn sigma_candidates<U: UnobservableModel, O: LinearObservableModel>(
+    model: &MultiLevelModel<U, O>,
+    cfg: &CalibrationConfig,
+) -> Vec<Vec<f64>> {
+    let bounds = model.prior.bounds();
+    if bounds.len() == 1 {
+        let (lo, hi) = bounds[0];
+        let n0 = coarse_nodes(cfg);
+        (0..n0)
+            .map(|i| vec![lo + (hi - lo) * i as f64 / (n0 - 1) as f64])
+            .collect()
+    } else {
+        model.prior.sample(16, derive_seed(cfg.seed, 8))
+    }
+}
+
+/// Nodes of the first, uniform pass of the grid posterior.
+fn coarse_nodes(cfg: &CalibrationConfig) -> usize {
+    (cfg.theta_grid_points.max(8) / 4).max(3)
+}
+
+/// Everything the Module-3 log densities need.
+pub struct ThetaLikelihood<'a, U, O> {
+    /// The residual model.
+    pub res: ThetaResiduals<'a, U, O>,
     /// Factored `V`.
     pub factor: &'a FactoredCovariance,
     /// `σ_ε²` for the no-discrepancy likelihood.
@@ -415,34 +624,13 @@ pub struct ThetaLikelihood<'a, U, O> {
 }
 
 impl<U: UnobservableModel, O: LinearObservableModel> ThetaLikelihood<'_, U, O> {
-    /// Stacked residuals `y − E_o(θ)` with (Eq. 41/50) and without discrepancy (`ρ = 1`, `δ = 0`).
-    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
-        let (n_e, n_o) = (self.exps.len(), self.exps.y.ncols());
-        let mut g = vec![0.0; self.model.unobservable.response_len()];
-        let mut b = vec![0.0; n_o];
-        let mut with = Vec::with_capacity(n_e * n_o);
-        let mut without = Vec::with_capacity(n_e * n_o);
-        for i in 0..n_e {
-            let x = x_row(&self.exps.x, i);
-            self.model.unobservable.evaluate(&x, theta, &mut g)?;
-            self.model.observable.offset(&x, theta, &mut b)?;
-            let ag = &self.parts.a * nalgebra::DVector::from_column_slice(&g);
-            for p in 0..n_o {
-                let y = self.exps.y[(i, p)];
-                with.push(y - (self.rho * ag[p] + b[p] + self.shift[(i, p)]));
-                without.push(y - (ag[p] + b[p]));
-            }
-        }
-        Ok((with, without))
-    }
-
     /// Unnormalised log posteriors (with, without discrepancy) at `θ`; `-∞` outside the prior.
     pub fn log_posteriors(&self, theta: &[f64], par: Par) -> Result<(f64, f64)> {
-        let lp = self.model.prior.ln_pdf(theta);
+        let lp = self.res.model.prior.ln_pdf(theta);
         if !lp.is_finite() {
             return Ok((f64::NEG_INFINITY, f64::NEG_INFINITY));
         }
-        let (with, without) = self.residuals(theta)?;
+        let (with, without) = self.res.residuals(theta)?;
         Ok((
             lp + self.factor.log_density(&with, par)?,
             lp + iid_log_density(&without, self.sigma2),
@@ -477,7 +665,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaLikelihood<'_, U, O> {
         cfg: &CalibrationConfig,
     ) -> Result<(ThetaPosterior, ThetaPosterior)> {
         let budget = cfg.theta_grid_points.max(8);
-        let n0 = (budget / 4).max(3);
+        let n0 = coarse_nodes(cfg);
         let coarse: Vec<f64> = (0..n0)
             .map(|i| lo + (hi - lo) * i as f64 / (n0 - 1) as f64)
             .collect();
@@ -513,11 +701,12 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaLikelihood<'_, U, O> {
 
     /// Both posteriors: grid quadrature for one-dimensional `θ`, adaptive Metropolis otherwise.
     pub fn posteriors(&self, cfg: &CalibrationConfig) -> Result<(ThetaPosterior, ThetaPosterior)> {
-        let bounds = self.model.prior.bounds();
+        let bounds = self.res.model.prior.bounds();
         if bounds.len() == 1 {
             return self.grid_posteriors(bounds[0], cfg);
         }
         let starts = self
+            .res
             .model
             .prior
             .sample(cfg.mcmc.chains, derive_seed(cfg.seed, 4));
@@ -527,7 +716,6 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaLikelihood<'_, U, O> {
                 |t: &[f64]| {
                     self.log_posteriors(t, Par::Seq)
                         .map(|v| if which == 0 { v.0 } else { v.1 })
-                        .unwrap_or(f64::NEG_INFINITY)
                 },
                 &starts,
                 &init_sd,
@@ -661,9 +849,27 @@ impl Calibration {
         Ok(())
     }
 
-    /// GP mean and latent variance of `α` at one `x`.
+    /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
+    /// `N x K` matrices): the coefficient GPs, plus, in the conditional coefficient mode, the
+    /// shift `Σ_k(x, X) w_k` of the posterior-averaged `α̂(θ)` ([`Calibration::alpha_correction`]).
+    pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+        let (mut mean, var) = self.gps.predict(x)?;
+        if let Some(w) = &self.alpha_correction {
+            for k in 0..mean.ncols() {
+                let cross = self.gps.covariance(k, x, &self.x_experiments)?;
+                let shift = cross * w.column(k);
+                mean.column_mut(k)
+                    .iter_mut()
+                    .zip(shift.iter())
+                    .for_each(|(m, s)| *m += s);
+            }
+        }
+        Ok((mean, var))
+    }
+
+    /// [`alpha_moments`](Self::alpha_moments) at one `x`.
     fn alpha_at(&self, x: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
-        let (m, v) = self.gps.predict(&DMatrix::from_row_slice(1, x.len(), x))?;
+        let (m, v) = self.alpha_moments(&DMatrix::from_row_slice(1, x.len(), x))?;
         Ok((
             m.row(0).iter().copied().collect(),
             v.row(0).iter().copied().collect(),

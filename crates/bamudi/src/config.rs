@@ -270,6 +270,30 @@ impl Default for McmcConfig {
     }
 }
 
+/// How Module 3 (Eq. 50) sets the discrepancy coefficients at a candidate `θ`.
+///
+/// ```
+/// let cfg = bamudi::CalibrationConfig::from_toml_str("coefficients = \"conditional_on_theta\"").unwrap();
+/// assert_eq!(cfg.coefficients, bamudi::CoefficientMode::ConditionalOnTheta);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoefficientMode {
+    /// The paper: `μ_α(x)` of Module 2, estimated with `θ` marginalised over its prior
+    /// (Eq. 25/27), is the same at every `θ`. The coefficients then absorb the difference
+    /// between the prior-averaged response and the response at the true `θ`, which pulls the
+    /// posterior towards the `θ` whose response equals the prior average (see
+    /// `docs/equations.md`, "Module 3 coefficient modes").
+    #[default]
+    PriorMarginal,
+    /// Not in the paper: at each `θ` the estimator of Eq. 29 is re-applied to the observations
+    /// shifted to what the prior-averaged model would have produced,
+    /// `y − ρ*(A g(x, θ) − A ḡ(x)) − (b(x, θ) − b̄(x))`, and the coefficient GPs are re-conditioned
+    /// on these `α̂(θ)` with their hyper-parameters held (a linear smoother). `θ` is then judged
+    /// by what a smooth discrepancy cannot explain at that `θ`.
+    ConditionalOnTheta,
+}
+
 /// Everything `calibrate` needs besides the model and the data.
 ///
 /// ```
@@ -305,6 +329,8 @@ pub struct CalibrationConfig {
     pub sigma_eps: Option<f64>,
     /// MCMC settings (for `dim θ > 1`).
     pub mcmc: McmcConfig,
+    /// How Module 3 sets the discrepancy coefficients at each `θ` (default: the paper's).
+    pub coefficients: CoefficientMode,
     /// Master seed; every random step derives its seed from it.
     pub seed: u64,
     /// Worker threads (`None`: rayon's default). Applied by the CLI to the global pool.
@@ -325,6 +351,7 @@ impl Default for CalibrationConfig {
             gp_restarts: 3,
             sigma_eps: None,
             mcmc: McmcConfig::default(),
+            coefficients: CoefficientMode::PriorMarginal,
             seed: 2021,
             threads: None,
             progress: true,
@@ -366,6 +393,8 @@ impl CalibrationConfig {
         sigma_eps: Option<f64>, "Some(1.0)");
     setter!(/// Sets the MCMC settings.
         mcmc: McmcConfig, "bamudi::McmcConfig::default()");
+    setter!(/// Sets how Module 3 treats the discrepancy coefficients at each `θ`.
+        coefficients: CoefficientMode, "bamudi::CoefficientMode::ConditionalOnTheta");
     setter!(/// Sets the master seed.
         seed: u64, "42");
     setter!(/// Sets the thread count.

@@ -27,6 +27,7 @@
 
 pub mod calibrate;
 pub mod closeloop;
+pub mod conditional;
 pub mod config;
 pub mod error;
 pub mod estimator;
@@ -42,7 +43,8 @@ pub mod training;
 
 pub use calibrate::{Band, Calibration, ThetaPosterior, Timings, calibrate};
 pub use config::{
-    CalibrationConfig, EstimatorConfig, Marginalisation, McmcConfig, RhoSearch, SamplingRule,
+    CalibrationConfig, CoefficientMode, EstimatorConfig, Marginalisation, McmcConfig, RhoSearch,
+    SamplingRule,
 };
 pub use error::{BamudiError, Result};
 pub use experiments::Experiments;

@@ -55,7 +55,7 @@ fn empirical_cov(points: &[Vec<f64>]) -> DMatrix<f64> {
 }
 
 /// Runs one chain; returns (kept draws, acceptance rate).
-fn run_chain<F: Fn(&[f64]) -> f64>(
+fn run_chain<F: Fn(&[f64]) -> Result<f64>>(
     logp: &F,
     start: &[f64],
     init_sd: &[f64],
@@ -65,7 +65,7 @@ fn run_chain<F: Fn(&[f64]) -> f64>(
     let d = start.len();
     let mut rng = StdRng::seed_from_u64(seed);
     let mut x = start.to_vec();
-    let mut lp = logp(&x);
+    let mut lp = logp(&x)?;
     if !lp.is_finite() {
         return Err(BamudiError::DegeneratePosterior(format!(
             "MCMC start {x:?} has log density {lp}"
@@ -80,7 +80,8 @@ fn run_chain<F: Fn(&[f64]) -> f64>(
         let z = DVector::from_fn(d, |_, _| standard_normal(&mut rng));
         let step = &chol * z;
         let prop: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-        let lp_prop = logp(&prop);
+        // A model error inside the density is an error of the run, not a rejected proposal.
+        let lp_prop = logp(&prop)?;
         let u: f64 = rng.random::<f64>();
         let accept = lp_prop.is_finite() && u.ln() < lp_prop - lp;
         if accept {
@@ -108,11 +109,12 @@ fn run_chain<F: Fn(&[f64]) -> f64>(
 
 /// Samples `exp(logp)` with one chain per start point (in parallel; chain `c` uses a seed
 /// derived from `seed` and `c`). `init_sd` sets the initial proposal standard deviations.
+/// `logp` returns `-∞` outside the support; an `Err` from it stops the run and is returned.
 ///
 /// ```
 /// use bamudi::{McmcConfig, mcmc::adaptive_metropolis};
 /// let cfg = McmcConfig { chains: 2, warmup: 500, samples: 2000 };
-/// let res = adaptive_metropolis(|t: &[f64]| -0.5 * t[0] * t[0], &[vec![-1.0], vec![1.0]], &[0.5], &cfg, 3).unwrap();
+/// let res = adaptive_metropolis(|t: &[f64]| Ok(-0.5 * t[0] * t[0]), &[vec![-1.0], vec![1.0]], &[0.5], &cfg, 3).unwrap();
 /// assert!(res.mean[0].abs() < 0.2 && res.rhat[0] < 1.05);
 /// ```
 pub fn adaptive_metropolis<F>(
@@ -123,7 +125,7 @@ pub fn adaptive_metropolis<F>(
     seed: u64,
 ) -> Result<McmcResult>
 where
-    F: Fn(&[f64]) -> f64 + Sync,
+    F: Fn(&[f64]) -> Result<f64> + Sync,
 {
     if starts.len() < 2 {
         return Err(BamudiError::config(

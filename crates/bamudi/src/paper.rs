@@ -19,8 +19,8 @@
 //! optional sensitivity study re-runs Modules 2-3 with the exact linear estimator for a few
 //! other rules and reports how ρ* and the θ posterior move.
 
-use crate::calibrate::{Calibration, ThetaPosterior, calibrate};
-use crate::config::{CalibrationConfig, EstimatorConfig, SamplingRule};
+use crate::calibrate::{Calibration, ThetaPosterior, calibrate, finish_calibration};
+use crate::config::{CalibrationConfig, CoefficientMode, EstimatorConfig, SamplingRule};
 use crate::error::{BamudiError, Result};
 use crate::experiments::Experiments;
 use mitergate::contact::{ContactModel, ContactParams};
@@ -62,6 +62,9 @@ pub struct ReproduceOptions {
     /// property of the gauges (the paper states σ = 1 µε), not of the unknown truth; without it
     /// 12 coefficients reproduce any 7 noise-free strains exactly and Eq. 30 is flat in ρ.
     pub gauge_noise_sd: f64,
+    /// Also run the conditional-coefficient variant ([`CoefficientMode::ConditionalOnTheta`]).
+    #[serde(default)]
+    pub conditional: bool,
     /// Master seed.
     pub seed: u64,
     /// Progress bars.
@@ -96,6 +99,7 @@ impl ReproduceOptions {
             mesh_element_size: None,
             sensitivity: true,
             gauge_noise_sd: 1.0,
+            conditional: true,
             seed: 2021,
             progress: true,
         }
@@ -118,6 +122,7 @@ impl ReproduceOptions {
             mesh_element_size: Some(24.0),
             sensitivity: false,
             gauge_noise_sd: 1.0,
+            conditional: true,
             seed: 2021,
             progress: false,
         }
@@ -194,6 +199,24 @@ pub struct SensitivityRow {
     pub theta: ThetaSummary,
 }
 
+/// The same scenario re-run with [`CoefficientMode::ConditionalOnTheta`] (not in the paper),
+/// reusing the fitted estimator of the main run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ConditionalResult {
+    /// ρ* of the profile search.
+    pub rho_star: f64,
+    /// θ posterior with the discrepancy model.
+    pub theta_posterior: ThetaSummary,
+    /// Force RMSE before/after.
+    pub force_rmse: ForceRmse,
+    /// Strain RMSE (the without-discrepancy column repeats the main run's).
+    pub strain_rmse: StrainRmse,
+    /// σ_ε used in Module 3 (estimated).
+    pub sigma_eps: f64,
+    /// Seconds for the re-run of Modules 2b-3 (profile search, GP refit, posterior).
+    pub seconds: f64,
+}
+
 /// Everything reported for one scenario (the `--json` schema of the README).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ScenarioResult {
@@ -222,6 +245,9 @@ pub struct ScenarioResult {
     pub timings_s: ScenarioTimings,
     /// Sampling-rule sensitivity (empty when not run).
     pub sensitivity: Vec<SensitivityRow>,
+    /// The conditional-coefficient variant (absent when not run).
+    #[serde(default)]
+    pub conditional: Option<ConditionalResult>,
 }
 
 /// Module-1 facts about the gate.
@@ -414,6 +440,16 @@ pub const SENSITIVITY_EXPERIMENTS: usize = 150;
 /// θ grid points per rule in the sensitivity study.
 pub const SENSITIVITY_GRID: usize = 61;
 
+/// Printed above the conditional-mode table.
+const CONDITIONAL_NOTE: &str = "\n## Module 3 with the coefficients conditioned on θ (not in the paper)\n\n\
+The paper's Module 3 (Eq. 50) uses coefficients estimated with θ marginalised over its prior \
+(Eq. 25/27), the same at every θ; they absorb the difference between the prior-averaged response \
+and the response at the true θ, so the posterior is pulled towards the θ whose response equals the \
+prior average and moves with the prior window. The conditional mode (`CoefficientMode::ConditionalOnTheta`) \
+re-applies the same fitted estimator at each θ to the observations shifted to the prior-averaged model, \
+re-conditions the coefficient GPs on them with their hyper-parameters held, and sets ρ* by Eq. 30 \
+with θ profiled instead of marginalised (see docs/equations.md). Same data, same estimator:\n\n";
+
 /// Printed under each sensitivity table.
 const SENSITIVITY_NOTE: &str = "\nThe ρ range shapes only the training set of learnt estimators; the exact linear \
 estimator needs no training set, so its ρ-range rows equal the default row (kept to show that). \
@@ -445,10 +481,12 @@ pub fn sensitivity_rules() -> Vec<(String, SamplingRule)> {
 }
 
 fn sensitivity(
-    model: &GateMultiLevel,
+    contact: &ContactModel,
+    prior: (f64, f64),
     exps: &Experiments,
     opts: &ReproduceOptions,
 ) -> Result<Vec<SensitivityRow>> {
+    let model = &gate_model(contact, prior)?;
     // Each rule re-runs Modules 2-3; to keep the study affordable it uses the first
     // `SENSITIVITY_EXPERIMENTS` experiments and a coarser θ grid (stated in the report).
     let n = exps.len().min(SENSITIVITY_EXPERIMENTS);
@@ -473,7 +511,85 @@ fn sensitivity(
             theta: ThetaSummary::of(&cal.posterior),
         });
     }
+    // The prior window shifted by a quarter of its width each way, with the paper's Module 3
+    // and with the conditional coefficients: how much of the posterior comes from the prior.
+    let quarter = 0.25 * (prior.1 - prior.0);
+    for shift in [0.0, -quarter, quarter] {
+        let shifted = (prior.0 + shift, prior.1 + shift);
+        let model = gate_model(contact, shifted)?;
+        for mode in [
+            CoefficientMode::PriorMarginal,
+            CoefficientMode::ConditionalOnTheta,
+        ] {
+            if shift == 0.0 && mode == CoefficientMode::PriorMarginal {
+                continue; // the "default" row above
+            }
+            let rule = SamplingRule::default();
+            let cfg = calibration_config(opts, rule.clone())
+                .estimator(EstimatorConfig::ExactLinear)
+                .theta_grid_points(SENSITIVITY_GRID)
+                .coefficients(mode)
+                .progress(false);
+            let cal = calibrate(&model, &sub, &cfg)?;
+            let what = match mode {
+                CoefficientMode::PriorMarginal => "paper's Module 3",
+                CoefficientMode::ConditionalOnTheta => "conditional coefficients",
+            };
+            rows.push(SensitivityRow {
+                rule: format!(
+                    "default rule, prior U({}, {}), {what} (exact linear estimator)",
+                    shifted.0, shifted.1
+                ),
+                rho_range: [rule.rho_range.0, rule.rho_range.1],
+                alpha_scale: rule.alpha_scale,
+                rho_star: cal.rho.rho_star,
+                theta: ThetaSummary::of(&cal.posterior),
+            });
+        }
+    }
     Ok(rows)
+}
+
+/// Re-runs Modules 2b-3 of a finished calibration with the conditional coefficient mode
+/// (same fitted estimator, same data) and scores it like the main run.
+fn run_conditional(
+    model: &GateMultiLevel,
+    exps: &Experiments,
+    cal: &Calibration,
+    scenario: &Scenario,
+    contact: &ContactModel,
+    new_x: &[[f64; 2]],
+    main_scores: &Scores,
+) -> Result<ConditionalResult> {
+    let t = Instant::now();
+    let cfg = cal
+        .config
+        .clone()
+        .coefficients(CoefficientMode::ConditionalOnTheta);
+    let cond = finish_calibration(
+        model,
+        exps,
+        &cfg,
+        cal.x_bounds.clone(),
+        cal.theta_rule.clone(),
+        cal.parts.clone(),
+        cal.training_pool_size,
+        cal.estimator.clone(),
+        crate::Timings::default(),
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let scores = score(model, &cond, scenario, contact, new_x)?;
+    Ok(ConditionalResult {
+        rho_star: cond.rho.rho_star,
+        theta_posterior: ThetaSummary::of(&cond.posterior),
+        force_rmse: scores.force,
+        strain_rmse: StrainRmse {
+            with_discrepancy: scores.strain.with_discrepancy,
+            without_discrepancy: main_scores.strain.without_discrepancy,
+        },
+        sigma_eps: cond.sigma_eps,
+        seconds,
+    })
 }
 
 /// Runs one scenario (1 or 2) on a built gate; returns the scored result and the calibration.
@@ -515,8 +631,15 @@ pub fn run_scenario(
                 .map(|(a, b)| a - b)
                 .collect::<Vec<_>>()
         }));
+    let conditional = if opts.conditional {
+        Some(run_conditional(
+            &model, &exps, &cal, &scenario, contact, &new_x, &scores,
+        )?)
+    } else {
+        None
+    };
     let sens = if opts.sensitivity {
-        sensitivity(&model, &exps, opts)?
+        sensitivity(contact, scenario.prior, &exps, opts)?
     } else {
         Vec::new()
     };
@@ -538,6 +661,7 @@ pub fn run_scenario(
             total: t_total.elapsed().as_secs_f64(),
         },
         sensitivity: sens,
+        conditional,
     };
     Ok((result, cal, model))
 }
@@ -708,6 +832,82 @@ impl ReproduceReport {
             &|r| format!("{:.1}", r.timings_s.total),
             "–",
         );
+        if sc.iter().any(|r| r.conditional.is_some()) {
+            s.push_str(CONDITIONAL_NOTE);
+            s.push_str("| quantity | paper's Module 3 S1 | conditional S1 | paper's Module 3 S2 | conditional S2 |\n|---|---|---|---|---|\n");
+            let crow = |s: &mut String,
+                        name: &str,
+                        f: &dyn Fn(&ScenarioResult) -> String,
+                        g: &dyn Fn(&ConditionalResult) -> String| {
+                let cell = |r: &ScenarioResult| r.conditional.as_ref().map(g).unwrap_or_default();
+                s.push_str(&format!(
+                    "| {name} | {} | {} | {} | {} |\n",
+                    f(&sc[0]),
+                    cell(&sc[0]),
+                    sc.get(1).map(f).unwrap_or_default(),
+                    sc.get(1).map(cell).unwrap_or_default()
+                ));
+            };
+            crow(
+                &mut s,
+                "ρ* (truth 0.8)",
+                &|r| format!("{:.3}", r.rho_star),
+                &|c| format!("{:.3}", c.rho_star),
+            );
+            crow(
+                &mut s,
+                "θ posterior: mean ± sd [95%] (truth 90 / 150)",
+                &|r| th(&r.theta_posterior),
+                &|c| th(&c.theta_posterior),
+            );
+            crow(
+                &mut s,
+                "normal force RMSE before → after (lbf/in)",
+                &|r| {
+                    format!(
+                        "{:.1} → {:.1}",
+                        r.force_rmse.normal_before, r.force_rmse.normal_after
+                    )
+                },
+                &|c| {
+                    format!(
+                        "{:.1} → {:.1}",
+                        c.force_rmse.normal_before, c.force_rmse.normal_after
+                    )
+                },
+            );
+            crow(
+                &mut s,
+                "tangential force RMSE before → after (lbf/in)",
+                &|r| {
+                    format!(
+                        "{:.1} → {:.1}",
+                        r.force_rmse.tangential_before, r.force_rmse.tangential_after
+                    )
+                },
+                &|c| {
+                    format!(
+                        "{:.1} → {:.1}",
+                        c.force_rmse.tangential_before, c.force_rmse.tangential_after
+                    )
+                },
+            );
+            crow(
+                &mut s,
+                "strain RMSE at new conditions (µε)",
+                &|r| format!("{:.2}", r.strain_rmse.with_discrepancy),
+                &|c| format!("{:.2}", c.strain_rmse.with_discrepancy),
+            );
+            crow(
+                &mut s,
+                "σ_ε estimated for Module 3 (µε)",
+                &|r| format!("{:.3}", r.sigma_eps),
+                &|c| format!("{:.3}", c.sigma_eps),
+            );
+            crow(&mut s, "extra wall time (s)", &|_| "–".into(), &|c| {
+                format!("{:.1}", c.seconds)
+            });
+        }
         for r in sc.iter().filter(|r| !r.sensitivity.is_empty()) {
             s.push_str(&format!(
                 "\n## Sampling-rule sensitivity, {} (θ* = {}; first {} experiments, {} θ nodes)\n\n| rule | ρ range | α scale c | ρ* | θ mean ± sd [95%] |\n|---|---|---|---|---|\n",

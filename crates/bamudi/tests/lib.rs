@@ -139,7 +139,7 @@ fn mcmc_recovers_a_correlated_2d_gaussian() {
     let prec = cov.clone().try_inverse().unwrap();
     let logp = |t: &[f64]| {
         let d = DVector::from_vec(vec![t[0] - mean[0], t[1] - mean[1]]);
-        -0.5 * (d.transpose() * &prec * &d)[(0, 0)]
+        Ok(-0.5 * (d.transpose() * &prec * &d)[(0, 0)])
     };
     let cfg = McmcConfig {
         chains: 4,
@@ -189,10 +189,32 @@ fn mcmc_is_reproducible_from_its_seed() {
         samples: 300,
     };
     let starts = vec![vec![0.0, 0.0], vec![1.0, 1.0]];
-    let f = |t: &[f64]| -0.5 * (t[0] * t[0] + t[1] * t[1]);
+    let f = |t: &[f64]| Ok(-0.5 * (t[0] * t[0] + t[1] * t[1]));
     let a = adaptive_metropolis(f, &starts, &[1.0, 1.0], &cfg, 5).unwrap();
     let b = adaptive_metropolis(f, &starts, &[1.0, 1.0], &cfg, 5).unwrap();
     assert_eq!(a, b);
+}
+
+#[test]
+fn mcmc_returns_the_density_error_instead_of_rejecting() {
+    let cfg = McmcConfig {
+        chains: 2,
+        warmup: 50,
+        samples: 50,
+    };
+    let starts = vec![vec![0.0], vec![0.1]];
+    // The density fails away from the start: the run must report it, not treat it as -inf.
+    let f = |t: &[f64]| {
+        if t[0].abs() > 0.5 {
+            Err(bamudi::BamudiError::DegeneratePosterior(format!(
+                "model failed at {t:?}"
+            )))
+        } else {
+            Ok(-0.5 * t[0] * t[0])
+        }
+    };
+    let err = adaptive_metropolis(f, &starts, &[2.0], &cfg, 5).unwrap_err();
+    assert!(err.to_string().contains("model failed"), "{err}");
 }
 
 #[test]
@@ -402,5 +424,38 @@ proptest! {
         // conditioning-limited round-off
         let err = (got.row(0).transpose() - &alpha).amax();
         prop_assert!(err < 1e-8, "err {err}, singular values {cond}");
+    }
+}
+
+#[test]
+fn gp_posterior_covariance_over_noise_variance_is_the_mean_smoother() {
+    // The conditional coefficient mode (bamudi::conditional) re-conditions the coefficient GPs
+    // on new targets through S = Σ(X, X) / σ_n² (and S(x*) = Σ(x*, X) / σ_n² at new inputs).
+    // Check the identity against the GP's own predictive mean, at the training inputs and at
+    // new ones, for a constant-mean GP with estimated noise.
+    let n = 60;
+    let x = DMatrix::from_fn(n, 2, |i, j| {
+        24.0 + 720.0 * (((i * 37 + j * 11) % n) as f64 / n as f64)
+    });
+    let mut g = beam_app::Normal64::new(4);
+    let y: Vec<f64> = (0..n)
+        .map(|i| 3.0 + (x[(i, 0)] / 200.0).sin() - (x[(i, 1)] / 300.0).cos() + 0.1 * g.normal())
+        .collect();
+    let model = gp::GpParams::new()
+        .kernel(gp::Kernel::SquaredExponential { ard: true })
+        .mean(gp::Mean::Constant)
+        .estimate_noise(true)
+        .restarts(1)
+        .seed(3)
+        .fit(&x, &y)
+        .unwrap();
+    let xs = DMatrix::from_fn(5, 2, |i, j| 100.0 + 120.0 * i as f64 + 7.0 * j as f64);
+    let yv = DVector::from_vec(y);
+    for pts in [&x, &xs] {
+        let smoothed = model.posterior_cov(pts, &x).unwrap() * &yv / model.noise_variance();
+        let mean = model.predict(pts).unwrap().mean;
+        let err = (smoothed - &mean).amax();
+        // two routes to the same linear map: round-off of a 60-point system only
+        assert!(err < 1e-8 * mean.amax(), "smoother vs GP mean: {err}");
     }
 }

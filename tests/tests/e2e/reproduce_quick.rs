@@ -69,5 +69,38 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             t.mean
         );
         assert!(s.rho_star >= 0.0 && s.rho_star <= 1.0);
+        // The conditional-coefficient variant (not in the paper): θ judged by what a smooth
+        // discrepancy cannot explain at that θ. Issue 7's paper-size criterion, 3 in, applies.
+        let c = s
+            .conditional
+            .as_ref()
+            .expect("quick options run the variant");
+        eprintln!(
+            "{} conditional: rho* {:.3}, theta {:.2} ± {:.2} [{:.2}, {:.2}]; normal RMSE {:.1} -> {:.1}; strain RMSE {:.2}; σ_ε {:.3}",
+            s.name,
+            c.rho_star,
+            c.theta_posterior.mean,
+            c.theta_posterior.sd,
+            c.theta_posterior.ci95[0],
+            c.theta_posterior.ci95[1],
+            c.force_rmse.normal_before,
+            c.force_rmse.normal_after,
+            c.strain_rmse.with_discrepancy,
+            c.sigma_eps
+        );
+        assert!(
+            (c.theta_posterior.mean - s.theta_true).abs() <= 3.0,
+            "{}: conditional θ mean {}",
+            s.name,
+            c.theta_posterior.mean
+        );
+        assert!(
+            (c.theta_posterior.mean - s.theta_true).abs() < (t.mean - s.theta_true).abs(),
+            "{}: conditional θ {} is not closer to θ* than the paper's Module 3 {}",
+            s.name,
+            c.theta_posterior.mean,
+            t.mean
+        );
+        assert!(c.strain_rmse.with_discrepancy < s.discrepancy_strain_rms);
     }
 }

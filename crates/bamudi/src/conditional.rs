@@ -1,0 +1,283 @@
+//! Module 3 with the discrepancy coefficients conditioned on `θ`
+//! ([`CoefficientMode::ConditionalOnTheta`](crate::CoefficientMode::ConditionalOnTheta); not in
+//! the paper).
+//!
+//! Module 2 estimates `α̂_i = f_ML(ρ*, x_i, y_i)` with `θ` marginalised over its prior
+//! (Eq. 25/27): the estimator has learnt the map from what the *prior-averaged* model
+//! `ρ A ḡ(x) + b̄(x) + B α` would produce back to `α`. When `θ` is fixed, the same
+//! observations correspond to the prior-averaged output
+//! `y − ρ*(A g(x, θ) − A ḡ(x)) − (b(x, θ) − b̄(x))`; feeding that to the estimator gives
+//! `α̂_i(θ)`. The coefficient GPs are then re-conditioned on `α̂(θ)` with their
+//! hyper-parameters held. A GP posterior mean at the training inputs is linear in the targets,
+//! `μ = S α̂`, and for a GP with white noise `σ_n²` and a GLS trend the smoother is the latent
+//! posterior covariance over the noise variance, `S = Σ(X, X) / σ_n²` (likewise
+//! `S(x*) = Σ(x*, X) / σ_n²` at a new input), so the shift costs one `N_e x N_e` product per
+//! coefficient. [`ConditionalCoefficients::new`] checks that identity on the Module-2 fit.
+
+use crate::config::RhoSearch;
+use crate::error::{BamudiError, Result};
+use crate::estimator::{CoefficientEstimator, FittedEstimator};
+use crate::training::XContext;
+use argmin::core::{CostFunction, Executor};
+use argmin::solver::brent::BrentOpt;
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Grid points of the profile search for `ρ` (before Brent's refinement).
+const PROFILE_RHO_POINTS: usize = 21;
+
+/// The model's `A g_u(x_i, θ)` and `b(x_i, θ)` rows at one `θ` (`N_e x N_o` each).
+#[derive(Debug, Clone)]
+pub struct ModelRows {
+    /// `θ`.
+    pub theta: Vec<f64>,
+    /// `A g_u(x_i, θ)`, row `i`.
+    pub ag: DMatrix<f64>,
+    /// `b(x_i, θ)`, row `i`.
+    pub b: DMatrix<f64>,
+}
+
+/// The profile search for `ρ` of the conditional mode: Eq. 30 with `θ` profiled (minimised
+/// over candidate values) instead of marginalised, and with the GP-smoothed coefficients, so
+/// that the fit is judged on what a smooth discrepancy cannot explain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RhoProfile {
+    /// `ρ*` of Eq. 30 (`θ` marginalised over its prior), kept for the report; the calibration
+    /// uses [`rho_star`](Self::rho_star).
+    pub rho_star_eq30: f64,
+    /// Grid values of `ρ`.
+    pub rho: Vec<f64>,
+    /// At each grid `ρ`: the smallest root-mean-square residual over the `θ` candidates (output
+    /// units).
+    pub rms: Vec<f64>,
+    /// The `θ` candidate attaining it.
+    pub theta_at_min: Vec<Vec<f64>>,
+    /// The minimiser (grid, refined by Brent's method).
+    pub rho_star: f64,
+    /// The `θ` candidate at `rho_star`.
+    pub theta_star: Vec<f64>,
+    /// The residual at `rho_star` (output units).
+    pub rms_at_star: f64,
+}
+
+/// Relative tolerance of the smoother identity check `S α̂ = μ_α` (the GP mean is computed by a
+/// different route, triangular solves, so agreement is to rounding of a 500-point system).
+const SMOOTHER_CHECK_RTOL: f64 = 1e-6;
+
+/// What re-estimating the coefficients at a given `θ` needs (see the module docs).
+pub struct ConditionalCoefficients<'a> {
+    estimator: &'a FittedEstimator,
+    ctx: &'a [XContext],
+    x: &'a DMatrix<f64>,
+    y: &'a DMatrix<f64>,
+    alpha_hat: &'a DMatrix<f64>,
+    smoothers: Vec<DMatrix<f64>>,
+}
+
+impl<'a> ConditionalCoefficients<'a> {
+    /// `alpha_hat` (`N_e x K`) are the Module-2 estimates at `ρ*`, `mu_alpha` their GP means at
+    /// the experiments, `covs[k]` the GP latent posterior covariance of coefficient `k` between
+    /// the experiments and `noise_var[k]` its white-noise variance. Fails if a noise variance is
+    /// not positive or the smoother does not reproduce the GP means.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        estimator: &'a FittedEstimator,
+        ctx: &'a [XContext],
+        x: &'a DMatrix<f64>,
+        y: &'a DMatrix<f64>,
+        alpha_hat: &'a DMatrix<f64>,
+        mu_alpha: &DMatrix<f64>,
+        covs: &[DMatrix<f64>],
+        noise_var: &[f64],
+    ) -> Result<Self> {
+        let mut smoothers = Vec::with_capacity(covs.len());
+        for (k, (c, nv)) in covs.iter().zip(noise_var).enumerate() {
+            if nv.is_nan() || *nv <= 0.0 {
+                return Err(BamudiError::Gp {
+                    coefficient: k,
+                    reason: format!(
+                        "white-noise variance {nv} is not positive: the conditional coefficient \
+                         mode needs the GP smoother Σ/σ_n²"
+                    ),
+                });
+            }
+            let s = c / *nv;
+            check_smoother(k, &s, alpha_hat, mu_alpha)?;
+            smoothers.push(s);
+        }
+        Ok(Self {
+            estimator,
+            ctx,
+            x,
+            y,
+            alpha_hat,
+            smoothers,
+        })
+    }
+
+    /// `α̂(ρ, θ)` (`N_e x K`): the estimator applied to the observations shifted to the
+    /// prior-averaged model, given the model rows at `θ`.
+    pub fn alpha(&self, rho: f64, ag: &DMatrix<f64>, b: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        let shifted = DMatrix::from_fn(self.y.nrows(), self.y.ncols(), |i, p| {
+            let c = &self.ctx[i];
+            self.y[(i, p)] - rho * (ag[(i, p)] - c.mean_ag[p]) - (b[(i, p)] - c.mean_offset[p])
+        });
+        self.estimator.predict(rho, self.x, &shifted, self.ctx)
+    }
+
+    /// `α̂(ρ, θ) − α̂` (`N_e x K`), the change of the GP targets.
+    pub fn delta(&self, rho: f64, ag: &DMatrix<f64>, b: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        Ok(self.alpha(rho, ag, b)? - self.alpha_hat)
+    }
+
+    /// Root-mean-square of `y − ρ A g(θ) − b(θ) − B S α̂(ρ, θ)` over all experiments and
+    /// outputs (output units); `bm` is `B = A L`.
+    pub fn rms(&self, rho: f64, rows: &ModelRows, bm: &DMatrix<f64>) -> Result<f64> {
+        let fitted = self.smooth(&self.alpha(rho, &rows.ag, &rows.b)?) * bm.transpose();
+        let r = self.y - rows.ag.scale(rho) - &rows.b - fitted;
+        let ms = r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64;
+        if !ms.is_finite() {
+            return Err(BamudiError::Numerical {
+                context: format!(
+                    "conditional residual at rho = {rho}, theta = {:?}",
+                    rows.theta
+                ),
+                reason: "non-finite".into(),
+            });
+        }
+        Ok(ms.sqrt())
+    }
+
+    /// The smallest [`rms`](Self::rms) over the candidate rows, with its index.
+    pub fn best_theta(
+        &self,
+        rho: f64,
+        rows: &[ModelRows],
+        bm: &DMatrix<f64>,
+    ) -> Result<(f64, usize)> {
+        let vals = rows
+            .par_iter()
+            .map(|r| self.rms(rho, r, bm))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(vals
+            .into_iter()
+            .enumerate()
+            .map(|(i, v)| (v, i))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .unwrap_or((f64::INFINITY, 0)))
+    }
+
+    /// The profile search for `ρ` over `[search.lo, search.hi]` (see [`RhoProfile`]).
+    pub fn profile_rho(
+        &self,
+        rows: &[ModelRows],
+        bm: &DMatrix<f64>,
+        search: &RhoSearch,
+        rho_star_eq30: f64,
+    ) -> Result<RhoProfile> {
+        if rows.is_empty() {
+            return Err(BamudiError::config(
+                "theta candidates",
+                "none to profile over",
+            ));
+        }
+        let n = PROFILE_RHO_POINTS;
+        let grid: Vec<f64> = (0..n)
+            .map(|i| search.lo + (search.hi - search.lo) * i as f64 / (n - 1) as f64)
+            .collect();
+        let evals = grid
+            .iter()
+            .map(|r| self.best_theta(*r, rows, bm))
+            .collect::<Result<Vec<_>>>()?;
+        let best = (0..n)
+            .min_by(|a, b| evals[*a].0.total_cmp(&evals[*b].0))
+            .unwrap_or(0);
+        let (mut rho_star, mut at_star) = (grid[best], evals[best]);
+        if search.refine {
+            let (lo, hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n - 1)]);
+            let solver = BrentOpt::new(lo, hi).set_tolerance(1e-6, 1e-10);
+            let res = Executor::new(ProfileCost { cc: self, rows, bm }, solver)
+                .configure(|s| s.param(rho_star).max_iters(40))
+                .run()
+                .map_err(|e| BamudiError::Numerical {
+                    context: "Brent refinement of the rho profile".into(),
+                    reason: e.to_string(),
+                })?;
+            if let Some(p) = res.state().best_param {
+                let e = self.best_theta(p, rows, bm)?;
+                if e.0 < at_star.0 {
+                    (rho_star, at_star) = (p, e);
+                }
+            }
+        }
+        Ok(RhoProfile {
+            rho_star_eq30,
+            rho: grid,
+            rms: evals.iter().map(|e| e.0).collect(),
+            theta_at_min: evals.iter().map(|e| rows[e.1].theta.clone()).collect(),
+            rho_star,
+            theta_star: rows[at_star.1].theta.clone(),
+            rms_at_star: at_star.0,
+        })
+    }
+
+    /// The change of the GP means at the experiments for a change `delta` of the targets:
+    /// column `k` is `S_k delta_k`.
+    pub fn smooth(&self, delta: &DMatrix<f64>) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(delta.nrows(), delta.ncols());
+        for (k, s) in self.smoothers.iter().enumerate() {
+            out.set_column(k, &(s * delta.column(k)));
+        }
+        out
+    }
+
+    /// The smoother weights `delta_k / σ_n,k²` per coefficient, so that the GP mean shift at a
+    /// new input is `Σ_k(x*, X) w_k` (stored by [`crate::Calibration`] for Module 4).
+    pub fn weights(delta: &DMatrix<f64>, noise_var: &[f64]) -> DMatrix<f64> {
+        DMatrix::from_fn(delta.nrows(), delta.ncols(), |i, k| {
+            delta[(i, k)] / noise_var[k]
+        })
+    }
+}
+
+struct ProfileCost<'a, 'b> {
+    cc: &'a ConditionalCoefficients<'b>,
+    rows: &'a [ModelRows],
+    bm: &'a DMatrix<f64>,
+}
+
+impl CostFunction for ProfileCost<'_, '_> {
+    type Param = f64;
+    type Output = f64;
+    fn cost(&self, rho: &f64) -> std::result::Result<f64, argmin::core::Error> {
+        self.cc
+            .best_theta(*rho, self.rows, self.bm)
+            .map(|e| e.0)
+            .map_err(|e| argmin::core::Error::msg(e.to_string()))
+    }
+}
+
+fn check_smoother(
+    k: usize,
+    s: &DMatrix<f64>,
+    alpha_hat: &DMatrix<f64>,
+    mu_alpha: &DMatrix<f64>,
+) -> Result<()> {
+    let target: DVector<f64> = alpha_hat.column(k).into_owned();
+    let got = s * &target;
+    let mu = mu_alpha.column(k);
+    let scale = mu.amax().max(target.amax()).max(f64::MIN_POSITIVE);
+    let err = (got - mu).amax();
+    if err > SMOOTHER_CHECK_RTOL * scale {
+        return Err(BamudiError::Gp {
+            coefficient: k,
+            reason: format!(
+                "the smoother Σ/σ_n² reproduces the GP mean only to {:.2e} (relative to {scale:.3e}); \
+                 the conditional coefficient mode needs it exact (was jitter added to the GP?)",
+                err / scale
+            ),
+        });
+    }
+    Ok(())
+}
