@@ -422,7 +422,7 @@ where
     let (posterior, posterior_no_discrepancy) = lik.posteriors(cfg)?;
     let mean_delta = match &conditional {
         None => None,
-        Some(_) => Some(lik.res.posterior_mean_delta(&posterior)?),
+        Some(cc) => Some(lik.res.posterior_mean_delta(cc, &posterior)?),
     };
     drop(lik);
     drop(conditional);
@@ -476,17 +476,6 @@ pub struct ThetaResiduals<'a, U, O> {
 }
 
 impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, U, O> {
-    /// `α̂(θ) − α̂` at the experiments (zero rows without the conditional mode).
-    fn delta(&self, theta: &[f64]) -> Result<Option<DMatrix<f64>>> {
-        match self.conditional {
-            None => Ok(None),
-            Some(c) => {
-                let rows = model_rows(self.model, self.exps, self.parts, theta)?;
-                c.delta(self.rho, &rows.ag, &rows.b).map(Some)
-            }
-        }
-    }
-
     /// Stacked residuals `y − E_o(θ)` with (Eq. 41/50) and without discrepancy (`ρ = 1`, `δ = 0`).
     pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
         let (n_e, n_o) = (self.exps.len(), self.exps.y.ncols());
@@ -509,17 +498,21 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, U, O> {
     }
 
     /// `E_θ[α̂(θ)] − α̂` over the posterior support (at most 50 points for MCMC).
-    fn posterior_mean_delta(&self, posterior: &ThetaPosterior) -> Result<DMatrix<f64>> {
-        let support = posterior.support(50);
-        let parts = support
+    fn posterior_mean_delta(
+        &self,
+        cc: &ConditionalCoefficients<'_>,
+        posterior: &ThetaPosterior,
+    ) -> Result<DMatrix<f64>> {
+        let parts = posterior
+            .support(50)
             .par_iter()
-            .map(|(theta, w)| Ok(self.delta(theta)?.map(|d| d * *w)))
+            .map(|(theta, w)| {
+                let rows = model_rows(self.model, self.exps, self.parts, theta)?;
+                Ok(cc.delta(self.rho, &rows.ag, &rows.b)? * *w)
+            })
             .collect::<Result<Vec<_>>>()?;
-        let k = self.parts.b.ncols();
-        Ok(parts
-            .into_iter()
-            .flatten()
-            .fold(DMatrix::zeros(self.exps.len(), k), |acc, d| acc + d))
+        let zero = DMatrix::zeros(self.exps.len(), self.parts.b.ncols());
+        Ok(parts.into_iter().fold(zero, |acc, d| acc + d))
     }
 }
 

@@ -480,6 +480,14 @@ pub fn sensitivity_rules() -> Vec<(String, SamplingRule)> {
     ]
 }
 
+/// The configuration of one sensitivity run: the exact linear estimator on a coarser θ grid.
+fn sensitivity_config(opts: &ReproduceOptions, rule: SamplingRule) -> CalibrationConfig {
+    calibration_config(opts, rule)
+        .estimator(EstimatorConfig::ExactLinear)
+        .theta_grid_points(SENSITIVITY_GRID)
+        .progress(false)
+}
+
 fn sensitivity(
     contact: &ContactModel,
     prior: (f64, f64),
@@ -498,10 +506,7 @@ fn sensitivity(
     )?;
     let mut rows = Vec::new();
     for (name, rule) in sensitivity_rules() {
-        let cfg = calibration_config(opts, rule.clone())
-            .estimator(EstimatorConfig::ExactLinear)
-            .theta_grid_points(SENSITIVITY_GRID)
-            .progress(false);
+        let cfg = sensitivity_config(opts, rule.clone());
         let cal = calibrate(model, &sub, &cfg)?;
         rows.push(SensitivityRow {
             rule: format!("{name} (exact linear estimator)"),
@@ -525,11 +530,7 @@ fn sensitivity(
                 continue; // the "default" row above
             }
             let rule = SamplingRule::default();
-            let cfg = calibration_config(opts, rule.clone())
-                .estimator(EstimatorConfig::ExactLinear)
-                .theta_grid_points(SENSITIVITY_GRID)
-                .coefficients(mode)
-                .progress(false);
+            let cfg = sensitivity_config(opts, rule.clone()).coefficients(mode);
             let cal = calibrate(&model, &sub, &cfg)?;
             let what = match mode {
                 CoefficientMode::PriorMarginal => "paper's Module 3",
