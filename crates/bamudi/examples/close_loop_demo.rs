@@ -2,7 +2,7 @@
 //! gate's contact + strain model as the truth (gap 90 in, 1 microstrain noise), one per
 //! simulated effect (default: thermal, drift, offset-jump, gap-growth to 130 in, wall-flexure
 //! (not in the loop's library) and none), run the loop with the BA-MUDI calibrator (gap prior
-//! U(60, 120) in) and print the before/after table (markdown) used in docs/closeloop.md.
+//! U(60, 150) in, wide enough for the gap-growth record) and print the before/after table (markdown) used in docs/closeloop.md.
 //!
 //! `cargo run --release -p bamudi --example close_loop_demo [-- <element size in> [effects,...]]`
 use bamudi::closeloop::{BamudiCalibrator, CloseLoopConfig, IngestConfig, close_loop, parse_csv};
@@ -42,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "simulated.csv",
             &IngestConfig::new(names.clone()),
         )?;
-        let calibrator = BamudiCalibrator::new(contact.clone(), (60.0, 120.0))?;
+        let calibrator = BamudiCalibrator::new(contact.clone(), (60.0, 150.0))?;
         let out = close_loop(&data, &calibrator, &CloseLoopConfig::default())?;
         let r = &out.report;
         let dir = std::env::temp_dir().join(format!("bamudi_close_loop_demo_{label}"));

@@ -366,7 +366,15 @@ where
             .map(|theta| model_rows(model, exps, &parts, theta))
             .collect::<Result<Vec<_>>>()?;
         let cc = gp_moments.conditional(&estimator, &ctx, exps, &alpha_hat)?;
-        let profile = cc.profile_rho(&candidate_rows, &parts.b, &cfg.rho, rho.rho_star)?;
+        let mut profile = cc.profile_rho(&candidate_rows, &parts.b, &cfg.rho, rho.rho_star)?;
+        if let Some(bracket) = neighbour_bracket(model, cfg, &profile.theta_star) {
+            let rows_at = |t: f64| model_rows(model, exps, &parts, &[t]);
+            if let Some(rows) =
+                cc.refine_scalar_theta(&mut profile, bracket, rows_at, &parts.b, &cfg.rho)?
+            {
+                candidate_rows.push(rows);
+            }
+        }
         let best = candidate_rows
             .iter()
             .find(|r| r.theta == profile.theta_star)
@@ -375,12 +383,27 @@ where
                 reason: "best theta candidate not found".into(),
             })?;
         let base = cc.alpha(profile.rho_star, &best.ag, &best.b)?;
+        drop(cc);
         timings.rho_s += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        gps = fit_gps(&base)?;
+        let refit = fit_gps(&base)?;
+        let refit_moments = GpMoments::of(&refit, &exps.x)?;
+        profile.rms_after_refit = refit_moments
+            .conditional(&estimator, &ctx, exps, &base)?
+            .rms(profile.rho_star, best, &parts.b)?;
         timings.gp_s += t.elapsed().as_secs_f64();
-        gp_moments = GpMoments::of(&gps, &exps.x)?;
-        alpha_hat = base;
+        // Kept only if it fits at least as well: B mixes the coefficients, and a refit that
+        // interpolates some of them and smooths others can fit worse than the Module-2 GPs.
+        profile.refit_kept = profile.rms_after_refit <= profile.rms_at_star;
+        if profile.refit_kept {
+            (gps, gp_moments, alpha_hat) = (refit, refit_moments, base);
+        } else {
+            eprintln!(
+                "bamudi: GP refit at rho* = {:.4}, theta = {:?} fits worse ({:.4} vs {:.4} RMS); \
+                 keeping the Module-2 GPs",
+                profile.rho_star, profile.theta_star, profile.rms_after_refit, profile.rms_at_star
+            );
+        }
         rho.rho_star = profile.rho_star;
         rho_profile = Some(profile);
     }
@@ -516,7 +539,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, U, O> {
     }
 }
 
-/// `A g_u(x_i, θ)` and `b(x_i, θ)` at every experiment (`N_e x N_o` each).
+/// `A g_u(x_i, θ)` and `b(x_i, θ)` at every experiment (`N_e x N_o` each; rows in parallel).
 fn model_rows<U: UnobservableModel, O: LinearObservableModel>(
     model: &MultiLevelModel<U, O>,
     exps: &Experiments,
@@ -524,22 +547,22 @@ fn model_rows<U: UnobservableModel, O: LinearObservableModel>(
     theta: &[f64],
 ) -> Result<ModelRows> {
     let (n_e, n_o) = (exps.len(), exps.y.ncols());
-    let mut g = vec![0.0; model.unobservable.response_len()];
-    let mut b = vec![0.0; n_o];
-    let mut rows = ModelRows {
+    let per_row = (0..n_e)
+        .into_par_iter()
+        .map(|i| {
+            let x = x_row(&exps.x, i);
+            let mut g = vec![0.0; model.unobservable.response_len()];
+            let mut b = vec![0.0; n_o];
+            model.unobservable.evaluate(&x, theta, &mut g)?;
+            model.observable.offset(&x, theta, &mut b)?;
+            Ok((&parts.a * nalgebra::DVector::from_vec(g), b))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ModelRows {
         theta: theta.to_vec(),
-        ag: DMatrix::zeros(n_e, n_o),
-        b: DMatrix::zeros(n_e, n_o),
-    };
-    for i in 0..n_e {
-        let x = x_row(&exps.x, i);
-        model.unobservable.evaluate(&x, theta, &mut g)?;
-        model.observable.offset(&x, theta, &mut b)?;
-        let ag = &parts.a * nalgebra::DVector::from_column_slice(&g);
-        rows.ag.set_row(i, &ag.transpose());
-        rows.b.set_row(i, &nalgebra::RowDVector::from_row_slice(&b));
-    }
-    Ok(rows)
+        ag: DMatrix::from_fn(n_e, n_o, |i, p| per_row[i].0[p]),
+        b: DMatrix::from_fn(n_e, n_o, |i, p| per_row[i].1[p]),
+    })
 }
 
 /// The coefficient GPs' means, latent covariances and noise variances at the experiments.
@@ -599,6 +622,21 @@ fn sigma_candidates<U: UnobservableModel, O: LinearObservableModel>(
     } else {
         model.prior.sample(16, derive_seed(cfg.seed, 8))
     }
+}
+
+/// For a scalar `θ`: the interval between the coarse candidates next to `theta` (inside the
+/// prior support), where the conditional mode refines the profile optimum.
+fn neighbour_bracket<U: UnobservableModel, O: LinearObservableModel>(
+    model: &MultiLevelModel<U, O>,
+    cfg: &CalibrationConfig,
+    theta: &[f64],
+) -> Option<(f64, f64)> {
+    let bounds = model.prior.bounds();
+    let ([(lo, hi)], [t]) = (&bounds[..], theta) else {
+        return None;
+    };
+    let h = (hi - lo) / (coarse_nodes(cfg) - 1) as f64;
+    Some(((t - h).max(*lo), (t + h).min(*hi)))
 }
 
 /// Nodes of the first, uniform pass of the grid posterior.

@@ -59,6 +59,14 @@ pub struct RhoProfile {
     pub theta_star: Vec<f64>,
     /// The residual at `rho_star` (output units).
     pub rms_at_star: f64,
+    /// The same residual after the coefficient GPs were refitted to `α̂(ρ*, θ*)` (equal to
+    /// `rms_at_star` until [`crate::calibrate()`] refits them).
+    #[serde(default)]
+    pub rms_after_refit: f64,
+    /// Whether the refitted GPs were kept (they are when `rms_after_refit <= rms_at_star`;
+    /// otherwise the Module-2 GPs stay).
+    #[serde(default)]
+    pub refit_kept: bool,
 }
 
 /// Relative tolerance of the smoother identity check `S α̂ = μ_α` (the GP mean is computed by a
@@ -196,19 +204,12 @@ impl<'a> ConditionalCoefficients<'a> {
         let (mut rho_star, mut at_star) = (grid[best], evals[best]);
         if search.refine {
             let (lo, hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(n - 1)]);
-            let solver = BrentOpt::new(lo, hi).set_tolerance(1e-6, 1e-10);
-            let res = Executor::new(ProfileCost { cc: self, rows, bm }, solver)
-                .configure(|s| s.param(rho_star).max_iters(40))
-                .run()
-                .map_err(|e| BamudiError::Numerical {
-                    context: "Brent refinement of the rho profile".into(),
-                    reason: e.to_string(),
-                })?;
-            if let Some(p) = res.state().best_param {
-                let e = self.best_theta(p, rows, bm)?;
-                if e.0 < at_star.0 {
-                    (rho_star, at_star) = (p, e);
-                }
+            let (p, _) = brent_minimise((lo, hi), rho_star, 1e-10, "rho profile", |r| {
+                self.best_theta(r, rows, bm).map(|e| e.0)
+            })?;
+            let e = self.best_theta(p, rows, bm)?;
+            if e.0 < at_star.0 {
+                (rho_star, at_star) = (p, e);
             }
         }
         Ok(RhoProfile {
@@ -219,7 +220,60 @@ impl<'a> ConditionalCoefficients<'a> {
             rho_star,
             theta_star: rows[at_star.1].theta.clone(),
             rms_at_star: at_star.0,
+            rms_after_refit: at_star.0,
+            refit_kept: false,
         })
+    }
+
+    /// Refines the profile optimum for a scalar `θ`, which the candidate grid resolves only to
+    /// its spacing (on the miter gate one coarse step of the gap moves the bottom gauges by
+    /// several microstrain, and `ρ` then absorbs the rest): `θ` by Brent's method on
+    /// `theta_bracket` (the neighbours of the best candidate), with `ρ` re-minimised at every
+    /// trial `θ` by Brent's method within two grid steps of `profile.rho_star` (inside
+    /// `[search.lo, search.hi]`). `rows_at(θ)` computes the model rows. Updates `rho_star`,
+    /// `theta_star` and `rms_at_star` when the refined point fits better and returns its rows
+    /// (or `None` when the grid optimum stands).
+    pub fn refine_scalar_theta(
+        &self,
+        profile: &mut RhoProfile,
+        theta_bracket: (f64, f64),
+        rows_at: impl Fn(f64) -> Result<ModelRows>,
+        bm: &DMatrix<f64>,
+        search: &RhoSearch,
+    ) -> Result<Option<ModelRows>> {
+        let [theta0] = profile.theta_star[..] else {
+            return Err(BamudiError::dim(
+                "theta (scalar refinement)",
+                1,
+                profile.theta_star.len(),
+            ));
+        };
+        let step = (search.hi - search.lo) / (PROFILE_RHO_POINTS - 1) as f64;
+        let rho_bracket = (
+            (profile.rho_star - 2.0 * step).max(search.lo),
+            (profile.rho_star + 2.0 * step).min(search.hi),
+        );
+        let best_rho = |rows: &ModelRows| {
+            brent_minimise(
+                rho_bracket,
+                profile.rho_star,
+                1e-10,
+                "rho at a trial theta",
+                |r| self.rms(r, rows, bm),
+            )
+        };
+        let (theta, _) = brent_minimise(theta_bracket, theta0, 1e-4, "theta refinement", |t| {
+            best_rho(&rows_at(t)?).map(|(_, rms)| rms)
+        })?;
+        let rows = rows_at(theta)?;
+        let (rho, rms) = best_rho(&rows)?;
+        if rms >= profile.rms_at_star {
+            return Ok(None);
+        }
+        profile.rho_star = rho;
+        profile.theta_star = vec![theta];
+        profile.rms_at_star = rms;
+        Ok(Some(rows))
     }
 
     /// The change of the GP means at the experiments for a change `delta` of the targets:
@@ -241,20 +295,44 @@ impl<'a> ConditionalCoefficients<'a> {
     }
 }
 
-struct ProfileCost<'a, 'b> {
-    cc: &'a ConditionalCoefficients<'b>,
-    rows: &'a [ModelRows],
-    bm: &'a DMatrix<f64>,
-}
+/// A scalar cost for argmin's Brent solver.
+struct FnCost<F>(F);
 
-impl CostFunction for ProfileCost<'_, '_> {
+impl<F: Fn(f64) -> Result<f64>> CostFunction for FnCost<F> {
     type Param = f64;
     type Output = f64;
-    fn cost(&self, rho: &f64) -> std::result::Result<f64, argmin::core::Error> {
-        self.cc
-            .best_theta(*rho, self.rows, self.bm)
-            .map(|e| e.0)
-            .map_err(|e| argmin::core::Error::msg(e.to_string()))
+    fn cost(&self, x: &f64) -> std::result::Result<f64, argmin::core::Error> {
+        (self.0)(*x).map_err(|e| argmin::core::Error::msg(e.to_string()))
+    }
+}
+
+/// Minimises `f` on `[lo, hi]` by Brent's method from `start` (absolute tolerance `abs_tol`);
+/// returns the minimiser and the minimum. `what` names the search in errors.
+fn brent_minimise(
+    (lo, hi): (f64, f64),
+    start: f64,
+    abs_tol: f64,
+    what: &str,
+    f: impl Fn(f64) -> Result<f64>,
+) -> Result<(f64, f64)> {
+    if hi <= lo {
+        return Ok((lo, f(lo)?));
+    }
+    let solver = BrentOpt::new(lo, hi).set_tolerance(1e-6, abs_tol);
+    let res = Executor::new(FnCost(f), solver)
+        .configure(|s| s.param(start.clamp(lo, hi)).max_iters(40))
+        .run()
+        .map_err(|e| BamudiError::Numerical {
+            context: format!("Brent search: {what}"),
+            reason: e.to_string(),
+        })?;
+    let st = res.state();
+    match st.best_param {
+        Some(p) => Ok((p, st.best_cost)),
+        None => Err(BamudiError::Numerical {
+            context: format!("Brent search: {what}"),
+            reason: "no point evaluated".into(),
+        }),
     }
 }
 

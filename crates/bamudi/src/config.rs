@@ -21,7 +21,12 @@ use serde::{Deserialize, Serialize};
 ///   quadrature node `θ_j`) is reused `draws_per_x` times: a training set of `N_t` samples needs
 ///   `N_t / draws_per_x` distinct `x` values ("the pool") and `pool * n_nodes` `g_u` calls.
 /// * `noise_sd`: standard deviation of Gaussian noise added to the training outputs `μ_o`
-///   (Eq. 27 has none; default 0).
+///   (Eq. 27 has none; default 0). Set it to the gauges' noise when calibrating on measured
+///   data: the estimator then learns (or, for the exact one, is) the noise-aware conditional
+///   mean. With 0 and fewer gauges than coefficients, 1 microstrain of measurement noise becomes
+///   coefficients of thousands of lbf/in, and the GP-smoothed fit can be worse than no
+///   discrepancy (docs/closeloop.md, "The real gate"). `reproduce-paper` and the close-loop
+///   calibrator set it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SamplingRule {

@@ -18,8 +18,13 @@ pub struct CloseLoopCmd {
     /// Maximum rows per BA-MUDI calibration (evenly thinned in time; the checks use all rows).
     #[arg(long, default_value_t = 240)]
     max_experiments: usize,
+    /// Gauge white-noise standard deviation (microstrain), used as the exact estimator's output
+    /// noise; estimated from each calibration's rows (first differences) when not given.
+    #[arg(long)]
+    gauge_noise_sd: Option<f64>,
     /// Optional TOML `CalibrationConfig` for the BA-MUDI calibrations (default: exact linear
-    /// estimator, 241 θ grid points, σ_ε estimated).
+    /// estimator, 241 θ grid points, σ_ε estimated; its `sampling.noise_sd` is replaced by the
+    /// gauge noise).
     #[arg(long)]
     calibration_config: Option<PathBuf>,
 }
@@ -49,6 +54,9 @@ pub fn run(c: &CloseLoopCmd, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
         let cfg = CalibrationConfig::from_toml_str(&text)
             .with_context(|| format!("in {}", p.display()))?;
         calibrator = calibrator.config(cfg);
+    }
+    if let Some(sd) = c.gauge_noise_sd {
+        calibrator = calibrator.gauge_noise_sd(sd).context("--gauge-noise-sd")?;
     }
     if let Some(s) = seed {
         let cfg = calibrator.calibration_config().clone().seed(s);

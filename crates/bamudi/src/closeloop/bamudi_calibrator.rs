@@ -9,6 +9,7 @@
 //!   prediction (Eq. 50, covariance of Eq. 51): per row the mixture over the grid posterior of
 //!   θ of `ρ* A g(x, θ_j) + s_w(x) + B μ_α(x)`; the variance is the between-θ variance + the
 //!   GP variance `Σ_k B_pk² σ²_αk(x)` + `σ_ε²` (a new measurement, not the noise-free strain).
+//!   Rows with the gate open ([`gate_open`]) get no discrepancy term (mean or variance).
 //! * [`BamudiModel::predict_at_theta`](super::CalibratedModel::predict_at_theta) is Eq. 50 at
 //!   a given gap per row: `ρ* A g(x, θ_i) + s_w(x) + B μ_α(x)`.
 //! * [`BamudiModel::theta_summary`](super::CalibratedModel::theta_summary) is the mean, sd and
@@ -33,6 +34,11 @@
 //!   (gate open) are left out of calibrations: they carry no quoin force, and Module 2's
 //!   sampling rule is undefined where the nominal response is identically zero.
 //!
+//! The exact estimator's output noise `σ_t` is the gauges' white-noise sd, estimated from the
+//! rows of each calibration ([`estimated_gauge_noise_sd`]) unless set with
+//! [`BamudiCalibrator::gauge_noise_sd`]; with `σ_t = 0` the estimator amplifies the noise into
+//! huge coefficients and the calibrated fit is worse than the noise.
+//!
 //! Module 3 runs with the coefficients conditioned on θ
 //! ([`CoefficientMode::ConditionalOnTheta`]): with the paper's prior-marginal coefficients the
 //! gap posterior follows the prior window and a clean record is misfitted by several
@@ -44,6 +50,7 @@
 //! mass (renormalised); the dropped tail changes a mean by at most `1e-6` times the spread of
 //! the component means.
 
+use super::stats::noise_sd_from_differences;
 use super::{CalibratedModel, Calibrator, ThetaSummary};
 use crate::calibrate::{Calibration, ThetaPosterior, calibrate};
 use crate::config::{CalibrationConfig, CoefficientMode, EstimatorConfig};
@@ -222,6 +229,7 @@ pub struct BamudiCalibrator {
     prior_in: (f64, f64),
     config: CalibrationConfig,
     max_experiments: usize,
+    gauge_noise_sd: Option<f64>,
 }
 
 impl std::fmt::Debug for BamudiCalibrator {
@@ -230,6 +238,7 @@ impl std::fmt::Debug for BamudiCalibrator {
             .field("prior_in", &self.prior_in)
             .field("config", &self.config)
             .field("max_experiments", &self.max_experiments)
+            .field("gauge_noise_sd", &self.gauge_noise_sd)
             .finish_non_exhaustive()
     }
 }
@@ -259,10 +268,13 @@ impl BamudiCalibrator {
                 .theta_grid_points(241)
                 .progress(false),
             max_experiments: 240,
+            gauge_noise_sd: None,
         })
     }
 
-    /// Replaces the calibration configuration (estimator, grid, `σ_ε`, seed, ...).
+    /// Replaces the calibration configuration (estimator, grid, `σ_ε`, seed, ...). Its
+    /// `sampling.noise_sd` is replaced at each calibration by the gauge noise (see
+    /// [`gauge_noise_sd`](Self::gauge_noise_sd)).
     ///
     /// ```
     /// # use mitergate::contact::{ContactParams, doc_gate};
@@ -287,6 +299,39 @@ impl BamudiCalibrator {
     pub fn max_experiments(mut self, n: usize) -> Self {
         self.max_experiments = n.max(3);
         self
+    }
+
+    /// Sets the gauges' white-noise standard deviation (microstrain), the output noise `σ_t` the
+    /// exact estimator assumes (`SamplingRule::noise_sd`). Unset (the default), it is
+    /// estimated from each calibration's rows (see [`estimated_gauge_noise_sd`]).
+    ///
+    /// ```
+    /// # use mitergate::contact::{ContactParams, doc_gate};
+    /// # let contact = ContactParams::default().build(doc_gate()).unwrap();
+    /// let c = bamudi::closeloop::BamudiCalibrator::new(contact, (40.0, 200.0)).unwrap();
+    /// assert_eq!(c.gauge_noise_sd(0.8).unwrap().configured_gauge_noise_sd(), Some(0.8));
+    /// ```
+    pub fn gauge_noise_sd(mut self, sd: f64) -> Result<Self, BamudiError> {
+        if !(sd.is_finite() && sd > 0.0) {
+            return Err(BamudiError::InvalidConfig {
+                name: "gauge_noise_sd",
+                reason: format!("must be a positive number of microstrain, got {sd}"),
+            });
+        }
+        self.gauge_noise_sd = Some(sd);
+        Ok(self)
+    }
+
+    /// The configured gauge noise sd (microstrain), `None` when it is estimated per calibration.
+    ///
+    /// ```
+    /// # use mitergate::contact::{ContactParams, doc_gate};
+    /// # let contact = ContactParams::default().build(doc_gate()).unwrap();
+    /// let c = bamudi::closeloop::BamudiCalibrator::new(contact, (40.0, 200.0)).unwrap();
+    /// assert_eq!(c.configured_gauge_noise_sd(), None);
+    /// ```
+    pub fn configured_gauge_noise_sd(&self) -> Option<f64> {
+        self.gauge_noise_sd
     }
 
     /// The calibration configuration.
@@ -360,7 +405,7 @@ impl BamudiCalibrator {
         // rows with the gate open (no head) carry no quoin force, and Module 2's sampling
         // rule is undefined where the nominal response is identically zero
         let loaded: Vec<usize> = (0..x.nrows())
-            .filter(|&i| x[(i, 0)] - x[(i, 1)] >= MIN_HEAD_IN)
+            .filter(|&i| !gate_open(&[x[(i, 0)], x[(i, 1)]]))
             .collect();
         let rows: Vec<usize> = thin_rows(loaded.len(), self.max_experiments)
             .into_iter()
@@ -374,13 +419,67 @@ impl BamudiCalibrator {
             pick(x),
             pick(y),
         )?;
-        let cal = calibrate(self.model.as_ref(), &exps, &self.config)?;
+        let noise_sd = self
+            .gauge_noise_sd
+            .unwrap_or_else(|| estimated_gauge_noise_sd(y));
+        let config = self
+            .config
+            .clone()
+            .sampling(self.config.sampling.clone().noise_sd(noise_sd));
+        let cal = calibrate(self.model.as_ref(), &exps, &config)?;
         Ok(BamudiModel {
             model: Arc::clone(&self.model),
             prior_in: self.prior_in,
             cal,
         })
     }
+}
+
+/// The gauges' white-noise standard deviation (microstrain) estimated from rows in time
+/// order: per gauge the robust first-difference estimate (median absolute deviation of
+/// `y[t+1] − y[t]` over `0.6745 √2`), then the median over gauges.
+///
+/// The exact estimator needs it as its output noise `σ_t`: with `σ_t = 0` it is the
+/// pseudo-inverse of `B` (7 gauges, 12 coefficients on the default gate), which turns 1
+/// microstrain of noise into coefficients of thousands of lbf/in; the coefficient GPs smooth
+/// each coefficient differently, `B` no longer cancels them, and the fit becomes worse than no
+/// discrepancy at all. Level changes between rows make the estimate err on the high side,
+/// which only regularises the estimator more.
+///
+/// ```
+/// use nalgebra::DMatrix;
+/// // a steady trend is not noise; a zig-zag of ±0.5 microstrain is
+/// let trend = DMatrix::from_fn(50, 3, |i, g| 0.1 * i as f64 + g as f64);
+/// assert!(bamudi::closeloop::bamudi_calibrator::estimated_gauge_noise_sd(&trend) < 1e-12);
+/// let zigzag = DMatrix::from_fn(51, 3, |i, _| if i % 2 == 0 { 0.5 } else { -0.5 });
+/// let sd = bamudi::closeloop::bamudi_calibrator::estimated_gauge_noise_sd(&zigzag);
+/// // 25 differences of +1 and 25 of −1: median 0, MAD 1
+/// assert!((sd - 1.0 / (0.6745 * 2f64.sqrt())).abs() < 1e-12);
+/// ```
+pub fn estimated_gauge_noise_sd(y: &DMatrix<f64>) -> f64 {
+    let mut per_gauge: Vec<f64> = y
+        .column_iter()
+        .map(|c| noise_sd_from_differences(c.as_slice()))
+        .collect();
+    per_gauge.sort_by(f64::total_cmp);
+    match per_gauge.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => per_gauge[n / 2],
+        n => 0.5 * (per_gauge[n / 2 - 1] + per_gauge[n / 2]),
+    }
+}
+
+/// Whether the row `[h_up, h_down]` (in) has less than [`MIN_HEAD_IN`] of head. Such rows are
+/// left out of calibrations, and the discrepancy is taken as zero there: it corrects the quoin
+/// contact force, and with no thrust there is no contact force to correct (a GP mean or
+/// variance extrapolated from loaded rows would be a guess with no physical basis).
+///
+/// ```
+/// use bamudi::closeloop::bamudi_calibrator::gate_open;
+/// assert!(gate_open(&[300.0, 300.0]) && !gate_open(&[500.0, 100.0]));
+/// ```
+pub fn gate_open(x: &[f64; 2]) -> bool {
+    x[0] - x[1] < MIN_HEAD_IN
 }
 
 /// `k` indices evenly spread over `0..n` (all of them when `n <= k`), first and last included.
@@ -470,6 +569,16 @@ impl BamudiModel {
         }
     }
 
+    /// `B μ_α(x_i)`, the discrepancy's strain; zero when the gate is open ([`gate_open`]).
+    fn discrepancy_shift(&self, mu: &DMatrix<f64>, i: usize, x: &[f64; 2]) -> DVector<f64> {
+        let b = &self.cal.parts.b;
+        if gate_open(x) {
+            DVector::zeros(b.nrows())
+        } else {
+            b * mu.row(i).transpose()
+        }
+    }
+
     fn check_x(&self, x: &DMatrix<f64>) -> Result<(), BamudiError> {
         if x.ncols() != 2 {
             return Err(BamudiError::dim(
@@ -493,7 +602,8 @@ impl CalibratedModel for BamudiModel {
             .into_par_iter()
             .map(|i| {
                 let xi = [x[(i, 0)], x[(i, 1)]];
-                let shift = b * mu.row(i).transpose();
+                let open = gate_open(&xi);
+                let shift = self.discrepancy_shift(&mu, i, &xi);
                 let comps = support
                     .iter()
                     .map(|(t, _)| self.model_strain(&xi, *t))
@@ -509,9 +619,13 @@ impl CalibratedModel for BamudiModel {
                         .zip(&support)
                         .map(|(c, (_, w))| w * (c[p] - mean[p]).powi(2))
                         .sum();
-                    let gp: f64 = (0..b.ncols())
-                        .map(|k| b[(p, k)].powi(2) * var_alpha[(i, k)])
-                        .sum();
+                    let gp: f64 = if open {
+                        0.0
+                    } else {
+                        (0..b.ncols())
+                            .map(|k| b[(p, k)].powi(2) * var_alpha[(i, k)])
+                            .sum()
+                    };
                     between + gp + noise
                 });
                 Ok((mean + shift, var))
@@ -541,8 +655,8 @@ impl CalibratedModel for BamudiModel {
         let rows = (0..x.nrows())
             .into_par_iter()
             .map(|i| {
-                let s = self.model_strain(&[x[(i, 0)], x[(i, 1)]], theta[i])?;
-                Ok(s + b * mu.row(i).transpose())
+                let xi = [x[(i, 0)], x[(i, 1)]];
+                Ok(self.model_strain(&xi, theta[i])? + self.discrepancy_shift(&mu, i, &xi))
             })
             .collect::<Result<Vec<_>, BamudiError>>()?;
         Ok(DMatrix::from_fn(x.nrows(), b.nrows(), |i, p| rows[i][p]))

@@ -2,6 +2,7 @@
 //! simulator switched on (it is never told which), bring the held-out RMSE near the noise
 //! level, move the gap estimate toward the truth, and add nothing to a clean record.
 
+mod fe_gate;
 mod ingest;
 mod scenarios;
 
