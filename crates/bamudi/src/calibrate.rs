@@ -394,8 +394,7 @@ where
         timings.gp_s += t.elapsed().as_secs_f64();
         // Kept only if it fits at least as well: B mixes the coefficients, and a refit that
         // interpolates some of them and smooths others can fit worse than the Module-2 GPs.
-        profile.refit_kept = profile.rms_after_refit <= profile.rms_at_star;
-        if profile.refit_kept {
+        if profile.refit_kept() {
             (gps, gp_moments, alpha_hat) = (refit, refit_moments, base);
         } else {
             eprintln!(

@@ -60,13 +60,26 @@ pub struct RhoProfile {
     /// The residual at `rho_star` (output units).
     pub rms_at_star: f64,
     /// The same residual after the coefficient GPs were refitted to `α̂(ρ*, θ*)` (equal to
-    /// `rms_at_star` until [`crate::calibrate()`] refits them).
+    /// `rms_at_star` until [`crate::calibrate()`] refits them; 0 when read from a file written
+    /// before this field existed, when the refit was always kept).
     #[serde(default)]
     pub rms_after_refit: f64,
-    /// Whether the refitted GPs were kept (they are when `rms_after_refit <= rms_at_star`;
-    /// otherwise the Module-2 GPs stay).
-    #[serde(default)]
-    pub refit_kept: bool,
+}
+
+impl RhoProfile {
+    /// Whether [`crate::calibrate()`] kept the GPs refitted to `α̂(ρ*, θ*)`: it does when they
+    /// fit at least as well (`rms_after_refit <= rms_at_star`), otherwise the Module-2 GPs
+    /// stay.
+    ///
+    /// ```
+    /// # let mut p: bamudi::conditional::RhoProfile = serde_json::from_str(r#"{"rho_star_eq30": 1.0, "rho": [], "rms": [],
+    /// #   "theta_at_min": [], "rho_star": 1.0, "theta_star": [90.0], "rms_at_star": 1.0}"#).unwrap();
+    /// p.rms_after_refit = 2.4;
+    /// assert!(!p.refit_kept());
+    /// ```
+    pub fn refit_kept(&self) -> bool {
+        self.rms_after_refit <= self.rms_at_star
+    }
 }
 
 /// Relative tolerance of the smoother identity check `S α̂ = μ_α` (the GP mean is computed by a
@@ -221,7 +234,6 @@ impl<'a> ConditionalCoefficients<'a> {
             theta_star: rows[at_star.1].theta.clone(),
             rms_at_star: at_star.0,
             rms_after_refit: at_star.0,
-            refit_kept: false,
         })
     }
 
@@ -262,11 +274,20 @@ impl<'a> ConditionalCoefficients<'a> {
                 |r| self.rms(r, rows, bm),
             )
         };
-        let (theta, _) = brent_minimise(theta_bracket, theta0, 1e-4, "theta refinement", |t| {
-            best_rho(&rows_at(t)?).map(|(_, rms)| rms)
+        // the best trial (rms, θ, ρ, rows), so that its contact solves are not repeated
+        let best = std::cell::RefCell::new(None::<(f64, f64, f64, ModelRows)>);
+        brent_minimise(theta_bracket, theta0, 1e-4, "theta refinement", |t| {
+            let rows = rows_at(t)?;
+            let (rho, rms) = best_rho(&rows)?;
+            let mut b = best.borrow_mut();
+            if b.as_ref().is_none_or(|(r, ..)| rms < *r) {
+                *b = Some((rms, t, rho, rows));
+            }
+            Ok(rms)
         })?;
-        let rows = rows_at(theta)?;
-        let (rho, rms) = best_rho(&rows)?;
+        let Some((rms, theta, rho, rows)) = best.into_inner() else {
+            return Ok(None);
+        };
         if rms >= profile.rms_at_star {
             return Ok(None);
         }

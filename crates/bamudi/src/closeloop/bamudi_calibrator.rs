@@ -50,7 +50,7 @@
 //! mass (renormalised); the dropped tail changes a mean by at most `1e-6` times the spread of
 //! the component means.
 
-use super::stats::noise_sd_from_differences;
+use super::stats::{median, noise_sd_from_differences};
 use super::{CalibratedModel, Calibrator, ThetaSummary};
 use crate::calibrate::{Calibration, ThetaPosterior, calibrate};
 use crate::config::{CalibrationConfig, CoefficientMode, EstimatorConfig};
@@ -461,12 +461,7 @@ pub fn estimated_gauge_noise_sd(y: &DMatrix<f64>) -> f64 {
         .column_iter()
         .map(|c| noise_sd_from_differences(c.as_slice()))
         .collect();
-    per_gauge.sort_by(f64::total_cmp);
-    match per_gauge.len() {
-        0 => 0.0,
-        n if n % 2 == 1 => per_gauge[n / 2],
-        n => 0.5 * (per_gauge[n / 2 - 1] + per_gauge[n / 2]),
-    }
+    median(&mut per_gauge)
 }
 
 /// Whether the row `[h_up, h_down]` (in) has less than [`MIN_HEAD_IN`] of head. Such rows are
@@ -570,9 +565,9 @@ impl BamudiModel {
     }
 
     /// `B μ_α(x_i)`, the discrepancy's strain; zero when the gate is open ([`gate_open`]).
-    fn discrepancy_shift(&self, mu: &DMatrix<f64>, i: usize, x: &[f64; 2]) -> DVector<f64> {
+    fn discrepancy_shift(&self, mu: &DMatrix<f64>, i: usize, open: bool) -> DVector<f64> {
         let b = &self.cal.parts.b;
-        if gate_open(x) {
+        if open {
             DVector::zeros(b.nrows())
         } else {
             b * mu.row(i).transpose()
@@ -603,7 +598,7 @@ impl CalibratedModel for BamudiModel {
             .map(|i| {
                 let xi = [x[(i, 0)], x[(i, 1)]];
                 let open = gate_open(&xi);
-                let shift = self.discrepancy_shift(&mu, i, &xi);
+                let shift = self.discrepancy_shift(&mu, i, open);
                 let comps = support
                     .iter()
                     .map(|(t, _)| self.model_strain(&xi, *t))
@@ -656,7 +651,8 @@ impl CalibratedModel for BamudiModel {
             .into_par_iter()
             .map(|i| {
                 let xi = [x[(i, 0)], x[(i, 1)]];
-                Ok(self.model_strain(&xi, theta[i])? + self.discrepancy_shift(&mu, i, &xi))
+                Ok(self.model_strain(&xi, theta[i])?
+                    + self.discrepancy_shift(&mu, i, gate_open(&xi)))
             })
             .collect::<Result<Vec<_>, BamudiError>>()?;
         Ok(DMatrix::from_fn(x.nrows(), b.nrows(), |i, p| rows[i][p]))

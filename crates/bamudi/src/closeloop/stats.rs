@@ -163,7 +163,11 @@ pub(crate) fn noise_sd_from_differences(r: &[f64]) -> f64 {
     median(&mut dev) / 0.6745 / std::f64::consts::SQRT_2
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// Median (sorts `v` in place; 0 when `v` is empty).
+pub(crate) fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
     v.sort_by(|a, b| a.total_cmp(b));
     let n = v.len();
     if n % 2 == 1 {
