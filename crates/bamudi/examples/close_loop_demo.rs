@@ -4,12 +4,39 @@
 //! (not in the loop's library) and none), run the loop with the BA-MUDI calibrator (gap prior
 //! U(60, 150) in, wide enough for the gap-growth record) and print the before/after table (markdown) used in docs/closeloop.md.
 //!
-//! `cargo run --release -p bamudi --example close_loop_demo [-- <element size in> [effects,...]]`
-use bamudi::closeloop::{BamudiCalibrator, CloseLoopConfig, IngestConfig, close_loop, parse_csv};
+//! `cargo run --release -p bamudi --example close_loop_demo [-- <element size in> [effects,...] [seed]]`
+use bamudi::BamudiError;
+use bamudi::closeloop::{
+    BamudiCalibrator, CalibratedModel, Calibrator, CloseLoopConfig, IngestConfig, close_loop,
+    parse_csv,
+};
 use mitergate::contact::ContactParams;
 use mitergate::field::{FieldConfig, FieldEffects, simulate};
 use mitergate::{GateConfig, GateModel};
+use nalgebra::DMatrix;
+use std::sync::Mutex;
 use std::time::Instant;
+
+/// Counts the calibrations the loop runs and their wall time (seconds).
+struct Counted {
+    inner: BamudiCalibrator,
+    calls: Mutex<(usize, f64)>,
+}
+
+impl Calibrator for Counted {
+    fn calibrate(
+        &self,
+        x: &DMatrix<f64>,
+        y: &DMatrix<f64>,
+    ) -> Result<Box<dyn CalibratedModel>, BamudiError> {
+        let t = Instant::now();
+        let out = self.inner.calibrate(x, y);
+        let mut c = self.calls.lock().unwrap_or_else(|e| e.into_inner());
+        c.0 += 1;
+        c.1 += t.elapsed().as_secs_f64();
+        out
+    }
+}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = GateConfig::default();
@@ -31,24 +58,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let effects = std::env::args()
         .nth(2)
         .unwrap_or_else(|| "thermal,drift,offset-jump,gap-growth,wall-flexure,none".into());
+    let seed: u64 = std::env::args().nth(3).map_or(Ok(2), |s| s.parse())?;
     for effect in effects.split(',') {
         let label = effect;
         let t = Instant::now();
         let fx = FieldEffects::default().with_preset(effect, 130.0)?;
-        let mut rec = simulate(&FieldConfig::default().seed(2).effects(fx), &truth)?;
+        let mut rec = simulate(&FieldConfig::default().seed(seed).effects(fx), &truth)?;
         rec.gauge_names = names.clone();
         let data = parse_csv(
             &rec.to_csv_string(),
             "simulated.csv",
             &IngestConfig::new(names.clone()),
         )?;
-        let calibrator = BamudiCalibrator::new(contact.clone(), (60.0, 150.0))?;
+        let calibrator = Counted {
+            inner: BamudiCalibrator::new(contact.clone(), (60.0, 150.0))?,
+            calls: Mutex::new((0, 0.0)),
+        };
         let out = close_loop(&data, &calibrator, &CloseLoopConfig::default())?;
+        let (calls, cal_s) = *calibrator.calls.lock().unwrap_or_else(|e| e.into_inner());
         let r = &out.report;
         let dir = std::env::temp_dir().join(format!("bamudi_close_loop_demo_{label}"));
         bamudi::closeloop::report::write_report(&out, &dir)?;
         eprintln!(
-            "{label}: {:.0} s, report in {}",
+            "{label}: {:.0} s ({calls} calibrations, {cal_s:.0} s in them), report in {}",
             t.elapsed().as_secs_f64(),
             dir.display()
         );

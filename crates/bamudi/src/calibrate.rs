@@ -569,6 +569,7 @@ struct GpMoments {
     mean: DMatrix<f64>,
     covs: Vec<DMatrix<f64>>,
     noise_var: Vec<f64>,
+    signal_var: Vec<f64>,
 }
 
 impl GpMoments {
@@ -581,6 +582,11 @@ impl GpMoments {
             mean,
             covs,
             noise_var: gps.noise_variances(),
+            signal_var: gps
+                .models
+                .iter()
+                .map(|m| m.hyperparameters().signal_variance)
+                .collect(),
         })
     }
 
@@ -601,6 +607,7 @@ impl GpMoments {
             &self.mean,
             &self.covs,
             &self.noise_var,
+            &self.signal_var,
         )
     }
 }

@@ -14,11 +14,16 @@
 //!    of physically named effects ([`EffectSpec`]: gauge offset, gauge drift, offset jump,
 //!    thermal strain with a fitted lag for every temperature column, filling/emptying load-path
 //!    hysteresis, a time-varying gap) and a generic sparse linear term in the covariates, each
-//!    fitted on the calibration window only;
-//! 4. accepts the best candidate only if it lowers the held-out mean square error by more than
+//!    fitted on the calibration window only; where the calibrated model would re-absorb
+//!    load-shaped terms ([`CalibratedModel::absorbs_load_functions`], BA-MUDI's discrepancy),
+//!    jointly with a smooth function of the load, so that what the first calibration absorbed
+//!    of an effect does not hide it;
+//! 4. adds each of the most promising candidates ([`CloseLoopConfig::confirm_candidates`]) to
+//!    the model, re-calibrates and back-fits, and accepts the best only if it then lowers the
+//!    held-out mean square error by more than
 //!    [`CloseLoopConfig::min_relative_improvement`] (the generic term must beat the best library
-//!    effect by that margin too), subtracts it, re-calibrates, re-fits the accepted effects
-//!    (back-fitting) and repeats until the residuals pass the checks or nothing improves;
+//!    effect by that margin too); repeats until the residuals pass the checks or nothing
+//!    improves;
 //! 5. reports every step ([`report::write_report`]: `report.md`, `results.json`, SVG plots).
 //!
 //! The loop is never told which effect is present; with no effect it reports
@@ -41,6 +46,7 @@
 pub mod bamudi_calibrator;
 mod data;
 mod effects;
+mod nuisance;
 pub mod reference;
 pub mod report;
 mod stats;
@@ -53,10 +59,12 @@ pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 use crate::BamudiError;
 use effects::{FitContext, Fitted};
 use nalgebra::DMatrix;
+use nuisance::LoadNuisance;
 use serde::{Deserialize, Serialize};
 use stats::{
     CheckThresholds, adequacy, mse_rows, noise_sd_from_differences, rmse_per_column, select_rows,
 };
+use std::sync::Arc;
 
 /// Posterior summary of the gap θ (in).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -84,6 +92,23 @@ pub trait CalibratedModel: Send + Sync {
     fn theta_summary(&self) -> ThetaSummary;
     /// Support of the prior of θ (in).
     fn theta_bounds(&self) -> (f64, f64);
+    /// Whether a re-calibration can absorb any smooth function of the load inputs at rows
+    /// with the gate closed (BA-MUDI's discrepancy `δ(x)` can). The loop then fits each
+    /// candidate effect together with such a function, so that the part of an effect that the
+    /// current calibration has absorbed does not hide it. Default: `false`.
+    ///
+    /// ```
+    /// use bamudi::closeloop::{CalibratedModel, Calibrator, reference::{GridCalibrator, ToyGate}};
+    /// let gate = ToyGate::default();
+    /// let rows = [[540.0, 180.0], [500.0, 180.0], [400.0, 180.0]];
+    /// let x = nalgebra::DMatrix::from_fn(3, 2, |i, j| rows[i][j]);
+    /// let y = nalgebra::DMatrix::from_fn(3, 7, |i, g| gate.strain(rows[i][0], rows[i][1], 90.0)[g]);
+    /// let m = GridCalibrator::new(gate, (40.0, 200.0)).calibrate(&x, &y).unwrap();
+    /// assert!(!m.absorbs_load_functions()); // θ is its only parameter
+    /// ```
+    fn absorbs_load_functions(&self) -> bool {
+        false
+    }
 }
 
 /// Calibrates a model on rows `x = [h_up, h_down]` (in) and gauge strains `y` (microstrain)
@@ -118,6 +143,9 @@ pub struct CloseLoopConfig {
     pub ljung_box_lags: usize,
     /// Family-wise significance level of the adequacy checks per window [0.01].
     pub significance: f64,
+    /// Candidates re-calibrated at each step to decide between them [3]; at least 2 are
+    /// (the best library effect and the best generic term) when both pass the screening.
+    pub confirm_candidates: usize,
 }
 
 impl Default for CloseLoopConfig {
@@ -131,6 +159,7 @@ impl Default for CloseLoopConfig {
             max_generic_features: 3,
             ljung_box_lags: 10,
             significance: 0.01,
+            confirm_candidates: 3,
         }
     }
 }
@@ -167,6 +196,17 @@ impl CloseLoopConfig {
         self
     }
 
+    /// Sets how many screened candidates are re-calibrated per step.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().confirm_candidates(4);
+    /// assert_eq!(c.confirm_candidates, 4);
+    /// ```
+    pub fn confirm_candidates(mut self, k: usize) -> Self {
+        self.confirm_candidates = k;
+        self
+    }
+
     fn validate(&self) -> Result<(), BamudiError> {
         let bad = |name, reason: String| Err(BamudiError::InvalidConfig { name, reason });
         if !(self.calibration_fraction > 0.0 && self.calibration_fraction < 1.0) {
@@ -186,6 +226,9 @@ impl CloseLoopConfig {
                 "significance",
                 format!("must be in (0, 1), got {}", self.significance),
             );
+        }
+        if self.confirm_candidates == 0 {
+            return bad("confirm_candidates", "must be >= 1".into());
         }
         if self.ljung_box_lags == 0 {
             return bad("ljung_box_lags", "must be >= 1".into());
@@ -255,6 +298,9 @@ impl Features {
     }
 }
 
+/// A calibrated model with its predictive mean and variance at every row.
+type Calibrated = (Arc<dyn CalibratedModel>, DMatrix<f64>, DMatrix<f64>);
+
 /// Score of one candidate at one step.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct CandidateScore {
@@ -262,10 +308,19 @@ pub struct CandidateScore {
     pub name: String,
     /// Covariates used.
     pub covariates: Vec<String>,
-    /// Held-out mean square residual with the candidate (microstrain²).
+    /// Screening: held-out mean square residual with the candidate fitted on the calibration
+    /// window (jointly with the load nuisance where the model absorbs one; microstrain²).
     pub heldout_mse: f64,
-    /// Relative reduction of the held-out mean square residual.
+    /// Screening: reduction of the held-out mean square residual against the nuisance-only
+    /// fit (or the residual itself), relative to the MSE before the step.
     pub relative_improvement: f64,
+    /// Held-out mean square residual after adding the candidate, re-calibrating and
+    /// back-fitting (microstrain²); `None` when it was not among the confirmed candidates.
+    #[serde(default)]
+    pub recalibrated_heldout_mse: Option<f64>,
+    /// Relative reduction of the held-out MSE after re-calibration (what the decision uses).
+    #[serde(default)]
+    pub recalibrated_relative_improvement: Option<f64>,
 }
 
 /// One iteration of the loop.
@@ -351,25 +406,40 @@ pub struct CloseLoopOutcome {
     pub effect_plot_covariates: Vec<String>,
 }
 
+/// The calibrated model, its predictive moments at every row and the accepted effects.
+#[derive(Clone)]
 struct State {
-    model: Box<dyn CalibratedModel>,
+    model: Arc<dyn CalibratedModel>,
     mean: DMatrix<f64>,
     var: DMatrix<f64>,
     effects: Vec<Fitted>,
 }
 
-/// A calibrated model with its predictive mean and variance at every row.
-type Calibrated = (Box<dyn CalibratedModel>, DMatrix<f64>, DMatrix<f64>);
+impl State {
+    fn has_gap_trend(&self) -> bool {
+        self.effects.iter().any(|e| e.spec == EffectSpec::GapTrend)
+    }
+}
 
-fn calibrate(
-    calibrator: &dyn Calibrator,
-    x: &DMatrix<f64>,
-    y_adj: &DMatrix<f64>,
-    cal: &[usize],
-) -> Result<Calibrated, BamudiError> {
-    let model = calibrator.calibrate(&select_rows(x, cal), &select_rows(y_adj, cal))?;
-    let (mean, var) = model.predict(x)?;
-    Ok((model, mean, var))
+/// A candidate after screening, with its fit (kept for confirmation).
+struct Screened {
+    score: CandidateScore,
+    fitted: Fitted,
+    /// Held-out MSE gain over the reference (residual, or residual minus nuisance-only fit).
+    gain: f64,
+}
+
+/// Everything fixed during one run of the loop.
+struct Loop<'a> {
+    calibrator: &'a dyn Calibrator,
+    x: &'a DMatrix<f64>,
+    y: &'a DMatrix<f64>,
+    feats: &'a Features,
+    cal: &'a [usize],
+    ho: &'a [usize],
+    gauges: &'a [String],
+    cfg: &'a CloseLoopConfig,
+    nuisance: Option<LoadNuisance>,
 }
 
 /// Runs the loop on a measured record. See the module docs.
@@ -396,42 +466,32 @@ pub fn close_loop(
     let cal: Vec<usize> = (0..n_cal).collect();
     let ho: Vec<usize> = (n_cal..n).collect();
     let feats = Features::new(rec);
-    let x = &rec.x;
-    let y = &rec.y;
     let gauges = &rec.gauge_names;
     let th = CheckThresholds {
         ljung_box_lags: cfg.ljung_box_lags,
         significance: cfg.significance,
     };
-    let temp_cols: Vec<String> = match &cfg.temperature_columns {
-        Some(c) => c.clone(),
-        None => rec
-            .covariate_names
-            .iter()
-            .filter(|c| c.to_lowercase().contains("temp"))
-            .cloned()
-            .collect(),
+    let library = effect_library(rec, cfg);
+    let lp = Loop {
+        calibrator,
+        x: &rec.x,
+        y: &rec.y,
+        feats: &feats,
+        cal: &cal,
+        ho: &ho,
+        gauges,
+        cfg,
+        nuisance: LoadNuisance::new(&rec.x, &cal),
     };
-    let mut library = vec![
-        EffectSpec::GaugeOffset,
-        EffectSpec::GaugeDrift,
-        EffectSpec::OffsetJump,
-    ];
-    library.extend(
-        temp_cols
-            .iter()
-            .map(|c| EffectSpec::Thermal { column: c.clone() }),
-    );
-    library.extend([EffectSpec::LoadPath, EffectSpec::GapTrend]);
 
-    let (model, mean, var) = calibrate(calibrator, x, y, &cal)?;
+    let (model, mean, var) = lp.calibrate(lp.y)?;
     let theta_before = model.theta_summary();
-    let r0 = y - &mean;
+    let r0 = lp.y - &mean;
     let checks_before = vec![
         adequacy("calibration", &r0, &var, &cal, gauges, &feats, &th),
         adequacy("heldout", &r0, &var, &ho, gauges, &feats, &th),
     ];
-    let mut noise: Vec<f64> = (0..y.ncols())
+    let mut noise: Vec<f64> = (0..r0.ncols())
         .map(|j| noise_sd_from_differences(&cal.iter().map(|&i| r0[(i, j)]).collect::<Vec<_>>()))
         .collect();
     noise.sort_by(|a, b| a.total_cmp(b));
@@ -446,7 +506,7 @@ pub fn close_loop(
     let mut steps = vec![];
     let mut conclusion = String::new();
     for step in 1..=cfg.max_steps {
-        let r = residual(&st, y, &feats, x, &cal, gauges, cfg)?;
+        let r = lp.residual(&st)?;
         let checks = [
             adequacy("calibration", &r, &st.var, &cal, gauges, &feats, &th),
             adequacy("heldout", &r, &st.var, &ho, gauges, &feats, &th),
@@ -460,86 +520,34 @@ pub fn close_loop(
             break;
         }
         let mse_before = mse_rows(&r, &ho);
-        let ctx = context(&st, &feats, x, &cal, gauges, cfg);
-        let mut scored: Vec<(CandidateScore, Fitted)> = vec![];
-        let accepted_names: Vec<String> = st.effects.iter().map(|e| e.spec.name()).collect();
-        for spec in library.iter().chain(std::iter::once(&EffectSpec::Generic)) {
-            if accepted_names.contains(&spec.name()) && *spec != EffectSpec::Generic {
-                continue;
-            }
-            let Some(f) = effects::fit(spec, &ctx, &r)? else {
-                continue;
-            };
-            let c = effects::contribution(&f, &ctx)?;
-            let mse = mse_rows(&(&r - &c), &ho);
-            scored.push((
-                CandidateScore {
-                    name: f.report.name.clone(),
-                    covariates: f.report.covariates.clone(),
-                    heldout_mse: mse,
-                    relative_improvement: 1.0 - mse / mse_before,
-                },
-                f,
-            ));
-        }
-        scored.sort_by(|a, b| a.0.heldout_mse.total_cmp(&b.0.heldout_mse));
-        let candidates: Vec<CandidateScore> = scored.iter().map(|s| s.0.clone()).collect();
-        let best_lib = scored.iter().find(|s| s.1.spec != EffectSpec::Generic);
-        let best_gen = scored.iter().find(|s| s.1.spec == EffectSpec::Generic);
-        let margin = cfg.min_relative_improvement * mse_before;
-        // a library effect is preferred unless the generic term beats it by the margin
-        let choice = match (best_lib, best_gen) {
-            (Some(l), Some(g)) if g.0.heldout_mse < l.0.heldout_mse - margin => Some(g),
-            (Some(l), _) => Some(l),
-            (None, g) => g,
-        };
-        let (accepted, decision) = match choice {
-            Some(c) if mse_before - c.0.heldout_mse > margin => (
-                Some(c.1.clone()),
-                format!(
-                    "accepted {}: held-out MSE {:.3} -> {:.3} microstrain^2 ({:.1} % better, threshold {:.1} %)",
-                    c.0.name,
-                    mse_before,
-                    c.0.heldout_mse,
-                    100.0 * c.0.relative_improvement,
-                    100.0 * cfg.min_relative_improvement
-                ),
-            ),
-            Some(c) => (
-                None,
-                format!(
-                    "no candidate lowers the held-out MSE by {:.1} % (best: {}, {:.1} %)",
-                    100.0 * cfg.min_relative_improvement,
-                    c.0.name,
-                    100.0 * c.0.relative_improvement
-                ),
-            ),
-            None => (None, "no candidate applies".into()),
-        };
-        let Some(fitted) = accepted else {
+        let (candidates, outcome) = lp.search(&st, &library, &r, mse_before)?;
+        let Some((next, name, decision)) = outcome.accepted else {
             conclusion = if st.effects.is_empty() {
                 format!(
-                    "no missing effect found: {decision}; remaining check failures: {}",
+                    "no missing effect found: {}; remaining check failures: {}",
+                    outcome.decision,
                     checks.iter().map(|c| c.failures.len()).sum::<usize>()
                 )
             } else {
-                format!("stopped after {} effect(s): {decision}", st.effects.len())
+                format!(
+                    "stopped after {} effect(s): {}",
+                    st.effects.len(),
+                    outcome.decision
+                )
             };
             steps.push(StepReport {
                 step,
                 heldout_mse_before: mse_before,
                 candidates,
                 accepted: None,
-                decision,
+                decision: outcome.decision,
                 heldout_rmse_after: rmse_per_column(&r, &ho),
                 theta_after: theta_now(&st).0,
             });
             break;
         };
-        let name = fitted.report.name.clone();
-        st.effects.push(fitted);
-        recalibrate_and_backfit(&mut st, calibrator, y, &feats, x, &cal, gauges, cfg)?;
-        let r_new = residual(&st, y, &feats, x, &cal, gauges, cfg)?;
+        st = next;
+        let r_new = lp.residual(&st)?;
         steps.push(StepReport {
             step,
             heldout_mse_before: mse_before,
@@ -553,7 +561,7 @@ pub fn close_loop(
             conclusion = format!("stopped at the maximum of {} effects", cfg.max_steps);
         }
     }
-    let r_final = residual(&st, y, &feats, x, &cal, gauges, cfg)?;
+    let r_final = lp.residual(&st)?;
     let checks_after = vec![
         adequacy("calibration", &r_final, &st.var, &cal, gauges, &feats, &th),
         adequacy("heldout", &r_final, &st.var, &ho, gauges, &feats, &th),
@@ -603,93 +611,300 @@ pub fn close_loop(
     })
 }
 
-fn context<'a>(
-    st: &'a State,
-    feats: &'a Features,
-    x: &'a DMatrix<f64>,
-    cal: &'a [usize],
-    gauges: &'a [String],
-    cfg: &CloseLoopConfig,
-) -> FitContext<'a> {
-    FitContext {
-        feats,
-        x,
-        cal,
-        model: st.model.as_ref(),
-        base_mean: &st.mean,
-        gauges,
-        gap_segments: cfg.gap_segments,
-        max_generic_features: cfg.max_generic_features,
-    }
+/// The physically named effects searched at every step (the generic term comes on top).
+fn effect_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<EffectSpec> {
+    let temp_cols: Vec<String> = match &cfg.temperature_columns {
+        Some(c) => c.clone(),
+        None => rec
+            .covariate_names
+            .iter()
+            .filter(|c| c.to_lowercase().contains("temp"))
+            .cloned()
+            .collect(),
+    };
+    let mut library = vec![
+        EffectSpec::GaugeOffset,
+        EffectSpec::GaugeDrift,
+        EffectSpec::OffsetJump,
+    ];
+    library.extend(
+        temp_cols
+            .iter()
+            .map(|c| EffectSpec::Thermal { column: c.clone() }),
+    );
+    library.extend([EffectSpec::LoadPath, EffectSpec::GapTrend]);
+    library
 }
 
-/// Data minus model mean minus every accepted effect.
-fn residual(
-    st: &State,
-    y: &DMatrix<f64>,
-    feats: &Features,
-    x: &DMatrix<f64>,
-    cal: &[usize],
-    gauges: &[String],
-    cfg: &CloseLoopConfig,
-) -> Result<DMatrix<f64>, BamudiError> {
-    let ctx = context(st, feats, x, cal, gauges, cfg);
-    let mut r = y - &st.mean;
-    for e in &st.effects {
-        r -= effects::contribution(e, &ctx)?;
-    }
-    Ok(r)
+/// What one step's search decided: the new state with the accepted effect, or nothing.
+struct SearchOutcome {
+    accepted: Option<(State, String, String)>,
+    decision: String,
 }
 
-/// Re-calibrates on the data minus the additive effects (the gap trend is model-relative and
-/// is re-fitted instead), then re-fits every effect with the others held fixed, twice.
-#[allow(clippy::too_many_arguments)]
-fn recalibrate_and_backfit(
-    st: &mut State,
-    calibrator: &dyn Calibrator,
-    y: &DMatrix<f64>,
-    feats: &Features,
-    x: &DMatrix<f64>,
-    cal: &[usize],
-    gauges: &[String],
-    cfg: &CloseLoopConfig,
-) -> Result<(), BamudiError> {
-    let has_gap = st.effects.iter().any(|e| e.spec == EffectSpec::GapTrend);
-    let mut last_sse = f64::INFINITY;
-    // alternate calibration and effect re-fits until the calibration-window fit settles
-    for _round in 0..10 {
-        if !has_gap {
-            let ctx = context(st, feats, x, cal, gauges, cfg);
-            let mut y_adj = y.clone();
-            for e in &st.effects {
-                y_adj -= effects::contribution(e, &ctx)?;
-            }
-            let (m, mean, var) = calibrate(calibrator, x, &y_adj, cal)?;
-            st.model = m;
-            st.mean = mean;
-            st.var = var;
+impl Loop<'_> {
+    fn calibrate(&self, y_adj: &DMatrix<f64>) -> Result<Calibrated, BamudiError> {
+        let model = self.calibrator.calibrate(
+            &select_rows(self.x, self.cal),
+            &select_rows(y_adj, self.cal),
+        )?;
+        let (mean, var) = model.predict(self.x)?;
+        Ok((Arc::from(model), mean, var))
+    }
+
+    fn context<'s>(&'s self, st: &'s State) -> FitContext<'s> {
+        FitContext {
+            feats: self.feats,
+            x: self.x,
+            cal: self.cal,
+            model: st.model.as_ref(),
+            base_mean: &st.mean,
+            gauges: self.gauges,
+            gap_segments: self.cfg.gap_segments,
+            max_generic_features: self.cfg.max_generic_features,
         }
-        for k in 0..st.effects.len() {
-            let ctx = context(st, feats, x, cal, gauges, cfg);
-            let mut r = y - &st.mean;
-            for (j, e) in st.effects.iter().enumerate() {
-                if j != k {
-                    r -= effects::contribution(e, &ctx)?;
+    }
+
+    /// The load nuisance, where a re-calibration of `st`'s model would absorb load
+    /// functions: its model says so, and no gap trend keeps the model fixed.
+    fn nuisance_for(&self, st: &State, adds_gap_trend: bool) -> Option<&LoadNuisance> {
+        let recalibrates = !(st.has_gap_trend() || adds_gap_trend);
+        self.nuisance
+            .as_ref()
+            .filter(|_| recalibrates && st.model.absorbs_load_functions())
+    }
+
+    /// Data minus model mean minus every accepted effect.
+    fn residual(&self, st: &State) -> Result<DMatrix<f64>, BamudiError> {
+        Ok(self.y - &st.mean - self.effect_sum(st)?)
+    }
+
+    /// One step: screen every candidate, confirm the most promising by re-calibrating with
+    /// each, and accept the best confirmed one if it clears the margin.
+    fn search(
+        &self,
+        st: &State,
+        library: &[EffectSpec],
+        r: &DMatrix<f64>,
+        mse_before: f64,
+    ) -> Result<(Vec<CandidateScore>, SearchOutcome), BamudiError> {
+        let margin = self.cfg.min_relative_improvement * mse_before;
+        let mut screened = self.screen(st, library, r, mse_before)?;
+        // half the margin: a screening gain that small cannot become a real one worth keeping
+        let picks = confirmation_picks(&screened, 0.5 * margin, self.cfg.confirm_candidates);
+        let mut trials: Vec<(usize, (State, bool), f64)> = vec![];
+        for &k in &picks {
+            let trial = self.with_effect(st, screened[k].fitted.clone())?;
+            let mse = mse_rows(&self.residual(&trial.0)?, self.ho);
+            screened[k].score.recalibrated_heldout_mse = Some(mse);
+            screened[k].score.recalibrated_relative_improvement = Some(1.0 - mse / mse_before);
+            trials.push((k, trial, mse));
+        }
+        let is_generic = |k: usize| screened[k].fitted.spec == EffectSpec::Generic;
+        let best = |generic: bool| {
+            trials
+                .iter()
+                .filter(|t| is_generic(t.0) == generic)
+                .min_by(|a, b| a.2.total_cmp(&b.2))
+        };
+        // a library effect is preferred unless the generic term beats it by the margin
+        let choice = match (best(false), best(true)) {
+            (Some(l), Some(g)) if g.2 < l.2 - margin => Some(g),
+            (Some(l), _) => Some(l),
+            (None, g) => g,
+        };
+        let pct = |v: f64| 100.0 * v;
+        let min_pct = pct(self.cfg.min_relative_improvement);
+        let outcome = match choice {
+            Some((k, (trial, settled), mse)) if mse_before - mse > margin => {
+                let name = screened[*k].score.name.clone();
+                let mut trial = trial.clone();
+                if !settled {
+                    self.recalibrate_and_backfit(&mut trial, MAX_BACKFIT_ROUNDS - CONFIRM_ROUNDS)?;
+                }
+                let decision = format!(
+                    "accepted {name}: held-out MSE {mse_before:.3} -> {mse:.3} microstrain^2 after re-calibration ({:.1} % better, threshold {min_pct:.1} %)",
+                    pct(1.0 - mse / mse_before)
+                );
+                SearchOutcome {
+                    accepted: Some((trial, name, decision.clone())),
+                    decision,
                 }
             }
-            let spec = st.effects[k].spec.clone();
-            if let Some(f) = effects::fit(&spec, &ctx, &r)? {
-                st.effects[k] = f;
+            Some((k, _, mse)) => SearchOutcome {
+                accepted: None,
+                decision: format!(
+                    "no candidate lowers the held-out MSE by {min_pct:.1} % after re-calibration (best: {}, {:.1} %)",
+                    screened[*k].score.name,
+                    pct(1.0 - mse / mse_before)
+                ),
+            },
+            None => SearchOutcome {
+                accepted: None,
+                decision: match screened.first() {
+                    Some(s) => format!(
+                        "no candidate lowers the held-out MSE by {min_pct:.1} % (best screened: {}, {:.1} %)",
+                        s.score.name,
+                        pct(s.gain / mse_before)
+                    ),
+                    None => "no candidate applies".into(),
+                },
+            },
+        };
+        // confirmed candidates first, by their re-calibrated error; then the screened order
+        screened.sort_by(|a, b| {
+            let key = |s: &Screened| {
+                (
+                    s.score.recalibrated_heldout_mse.is_none(),
+                    s.score.recalibrated_heldout_mse.unwrap_or(-s.gain),
+                )
+            };
+            let (ka, kb) = (key(a), key(b));
+            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+        });
+        Ok((screened.into_iter().map(|s| s.score).collect(), outcome))
+    }
+
+    /// Every candidate fitted on the calibration window (jointly with the load nuisance where
+    /// a re-calibration would absorb one) and scored on the held-out window; best gain first.
+    fn screen(
+        &self,
+        st: &State,
+        library: &[EffectSpec],
+        r: &DMatrix<f64>,
+        mse_before: f64,
+    ) -> Result<Vec<Screened>, BamudiError> {
+        let ctx = self.context(st);
+        let accepted: Vec<String> = st.effects.iter().map(|e| e.spec.name()).collect();
+        let mut out = vec![];
+        for spec in library.iter().chain(std::iter::once(&EffectSpec::Generic)) {
+            if accepted.contains(&spec.name()) && *spec != EffectSpec::Generic {
+                continue;
+            }
+            let nu = self.nuisance_for(st, *spec == EffectSpec::GapTrend);
+            let Some(j) = nuisance::fit_jointly(spec, &ctx, r, nu)? else {
+                continue;
+            };
+            // the reference is what the nuisance alone would leave, so that a candidate is
+            // credited only with what the re-calibration could not have done by itself
+            let reference = match nu {
+                Some(n) => mse_rows(&(r - n.fit(r, self.cal)), self.ho),
+                None => mse_before,
+            };
+            let mse = mse_rows(&(r - &j.effect - &j.nuisance), self.ho);
+            out.push(Screened {
+                score: CandidateScore {
+                    name: j.fitted.report.name.clone(),
+                    covariates: j.fitted.report.covariates.clone(),
+                    heldout_mse: mse,
+                    relative_improvement: (reference - mse) / mse_before,
+                    recalibrated_heldout_mse: None,
+                    recalibrated_relative_improvement: None,
+                },
+                gain: reference - mse,
+                fitted: j.fitted,
+            });
+        }
+        out.sort_by(|a, b| b.gain.total_cmp(&a.gain));
+        Ok(out)
+    }
+
+    /// `st` with one more effect, re-calibrated and back-fitted for at most
+    /// [`CONFIRM_ROUNDS`] calibrations; `true` when the back-fit settled.
+    fn with_effect(&self, st: &State, fitted: Fitted) -> Result<(State, bool), BamudiError> {
+        let mut trial = st.clone();
+        trial.effects.push(fitted);
+        let settled = self.recalibrate_and_backfit(&mut trial, CONFIRM_ROUNDS)?;
+        Ok((trial, settled))
+    }
+
+    /// Re-calibrates on the data minus the additive effects (the gap trend is model-relative
+    /// and is re-fitted instead), then re-fits every effect with the others held fixed, until
+    /// the re-fitted effects agree with those the calibration was given.
+    /// Returns whether it settled within `max_rounds` calibrations.
+    fn recalibrate_and_backfit(
+        &self,
+        st: &mut State,
+        max_rounds: usize,
+    ) -> Result<bool, BamudiError> {
+        let has_gap = st.has_gap_trend();
+        for _round in 0..max_rounds {
+            let given = self.effect_sum(st)?;
+            if !has_gap {
+                let (m, mean, var) = self.calibrate(&(self.y - &given))?;
+                st.model = m;
+                st.mean = mean;
+                st.var = var;
+            }
+            let nu = self.nuisance_for(st, false);
+            for k in 0..st.effects.len() {
+                let ctx = self.context(st);
+                let mut r = self.y - &st.mean;
+                for (j, e) in st.effects.iter().enumerate() {
+                    if j != k {
+                        r -= effects::contribution(e, &ctx)?;
+                    }
+                }
+                let spec = st.effects[k].spec.clone();
+                if let Some(j) = nuisance::fit_jointly(&spec, &ctx, &r, nu)? {
+                    st.effects[k] = j.fitted;
+                }
+            }
+            let moved = mse_rows(&(self.effect_sum(st)? - &given), self.cal).sqrt();
+            let resid = mse_rows(&self.residual(st)?, self.cal).sqrt();
+            if has_gap || moved <= BACKFIT_TOL * resid {
+                return Ok(true);
             }
         }
-        let sse = mse_rows(&residual(st, y, feats, x, cal, gauges, cfg)?, cal);
-        // 1e-4 relative: far below the noise-level changes the acceptance rule looks at
-        if has_gap || (last_sse - sse).abs() <= 1e-4 * sse {
+        Ok(false)
+    }
+
+    /// The sum of the accepted effects' contributions at every row (microstrain).
+    fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>, BamudiError> {
+        let ctx = self.context(st);
+        let mut sum = DMatrix::zeros(self.y.nrows(), self.y.ncols());
+        for e in &st.effects {
+            sum += effects::contribution(e, &ctx)?;
+        }
+        Ok(sum)
+    }
+}
+
+/// Most calibrations in one back-fit.
+const MAX_BACKFIT_ROUNDS: usize = 10;
+/// Calibrations a candidate gets before it is scored. The right effect, fitted jointly with
+/// the load nuisance, settles in 2 (measured on the FE gate: the first re-calibration moves it
+/// by a quarter of the noise, the second by 0.2 %); a wrong one keeps trading signal with the
+/// discrepancy for 5-7 rounds while its error barely changes (2.14 -> 1.95 microstrain for a
+/// generic term on an offset-jump record), so the ranking is settled after 3. The accepted
+/// candidate then finishes its back-fit.
+const CONFIRM_ROUNDS: usize = 3;
+/// The back-fit stops when the re-fitted effects differ from those the calibration was given by
+/// less than this fraction of the residual RMS (calibration window): the calibration then saw
+/// data consistent with its effects to 2 % of the noise, which changes the residual's mean
+/// square by about 0.04 %, far below the 5 % margin the loop decides on.
+const BACKFIT_TOL: f64 = 0.02;
+
+/// Which screened candidates (indices into `screened`, best gain first) are re-calibrated:
+/// those gaining more than `min_gain`, at most `k` of them, always including the best library
+/// effect and the best generic term among them so that the preference rule can be applied.
+fn confirmation_picks(screened: &[Screened], min_gain: f64, k: usize) -> Vec<usize> {
+    let eligible: Vec<usize> = (0..screened.len())
+        .filter(|&i| screened[i].gain > min_gain)
+        .collect();
+    let generic = |i: &usize| screened[*i].fitted.spec == EffectSpec::Generic;
+    let mut picks: Vec<usize> = vec![];
+    picks.extend(eligible.iter().find(|i| !generic(i)));
+    picks.extend(eligible.iter().find(|i| generic(i)));
+    for i in eligible {
+        if picks.len() >= k {
             break;
         }
-        last_sse = sse;
+        if !picks.contains(&i) {
+            picks.push(i);
+        }
     }
-    Ok(())
+    picks
 }
 
 /// θ now: the gap at the end of the record when a gap trend is accepted, else the model's.

@@ -100,17 +100,21 @@ pub fn markdown(r: &CloseLoopReport) -> String {
     for st in &r.steps {
         let _ = writeln!(
             s,
-            "### Step {} — {}\n\n| candidate | covariates | held-out MSE (microstrain²) | relative improvement |\n|---|---|---|---|",
+            "### Step {} — {}\n\n| candidate | covariates | screened held-out MSE (microstrain²) | screened improvement | held-out MSE after re-calibration (microstrain²) | improvement after re-calibration |\n|---|---|---|---|---|---|",
             st.step, st.decision
         );
         for c in &st.candidates {
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.4} | {:.1} % |",
+                "| {} | {} | {:.4} | {:.1} % | {} | {} |",
                 c.name,
                 c.covariates.join(", "),
                 c.heldout_mse,
-                100.0 * c.relative_improvement
+                100.0 * c.relative_improvement,
+                c.recalibrated_heldout_mse
+                    .map_or("–".into(), |v| format!("{v:.4}")),
+                c.recalibrated_relative_improvement
+                    .map_or("–".into(), |v| format!("{:.1} %", 100.0 * v)),
             );
         }
         s.push('\n');
