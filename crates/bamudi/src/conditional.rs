@@ -117,8 +117,9 @@ impl<'a> ConditionalCoefficients<'a> {
     /// `alpha_hat` (`N_e x K`) are the Module-2 estimates at `ρ*`, `mu_alpha` their GP means at
     /// the experiments, `covs[k]` the GP latent posterior covariance of coefficient `k` between
     /// the experiments, `noise_var[k]` its white-noise variance and `signal_var[k]` its signal
-    /// variance (output units², for the rounding tolerance of the check). Fails if a noise
-    /// variance is not positive or the smoother does not reproduce the GP means.
+    /// variance (output units², for the rounding tolerance of the check). Fails if the three
+    /// lists differ in length, a noise variance is not positive or the smoother does not
+    /// reproduce the GP means.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         estimator: &'a FittedEstimator,
@@ -131,6 +132,15 @@ impl<'a> ConditionalCoefficients<'a> {
         noise_var: &[f64],
         signal_var: &[f64],
     ) -> Result<Self> {
+        for (what, len) in [("noise", noise_var.len()), ("signal", signal_var.len())] {
+            if len != covs.len() {
+                return Err(BamudiError::dim(
+                    format!("coefficient GP {what} variances vs covariances"),
+                    covs.len(),
+                    len,
+                ));
+            }
+        }
         let mut smoothers = Vec::with_capacity(covs.len());
         for (k, (c, nv)) in covs.iter().zip(noise_var).enumerate() {
             if nv.is_nan() || *nv <= 0.0 {
@@ -143,14 +153,8 @@ impl<'a> ConditionalCoefficients<'a> {
                 });
             }
             let s = c / *nv;
-            let sf2 = signal_var.get(k).copied().unwrap_or(*nv);
-            check_smoother(
-                k,
-                &s,
-                alpha_hat,
-                mu_alpha,
-                smoother_tolerance(s.nrows(), sf2, *nv),
-            )?;
+            let rtol = smoother_tolerance(s.nrows(), signal_var[k], *nv);
+            check_smoother(k, &s, alpha_hat, mu_alpha, rtol)?;
             smoothers.push(s);
         }
         Ok(Self {

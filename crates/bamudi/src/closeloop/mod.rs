@@ -717,10 +717,12 @@ impl Loop<'_> {
         };
         let pct = |v: f64| 100.0 * v;
         let min_pct = pct(self.cfg.min_relative_improvement);
+        let choice = choice.map(|c| (c.0, c.2));
         let outcome = match choice {
-            Some((k, (trial, settled), mse)) if mse_before - mse > margin => {
-                let name = screened[*k].score.name.clone();
-                let mut trial = trial.clone();
+            Some((k, mse)) if mse_before - mse > margin => {
+                let name = screened[k].score.name.clone();
+                let at = trials.iter().position(|t| t.0 == k).unwrap_or(0);
+                let (_, (mut trial, settled), _) = trials.swap_remove(at);
                 if !settled {
                     self.recalibrate_and_backfit(&mut trial, MAX_BACKFIT_ROUNDS - CONFIRM_ROUNDS)?;
                 }
@@ -733,11 +735,11 @@ impl Loop<'_> {
                     decision,
                 }
             }
-            Some((k, _, mse)) => SearchOutcome {
+            Some((k, mse)) => SearchOutcome {
                 accepted: None,
                 decision: format!(
                     "no candidate lowers the held-out MSE by {min_pct:.1} % after re-calibration (best: {}, {:.1} %)",
-                    screened[*k].score.name,
+                    screened[k].score.name,
                     pct(1.0 - mse / mse_before)
                 ),
             },
@@ -778,6 +780,11 @@ impl Loop<'_> {
     ) -> Result<Vec<Screened>, BamudiError> {
         let ctx = self.context(st);
         let accepted: Vec<String> = st.effects.iter().map(|e| e.spec.name()).collect();
+        // what the nuisance alone would leave, so that a candidate is credited only with what
+        // the re-calibration could not have done by itself (the same for every candidate)
+        let nuisance_only = self
+            .nuisance_for(st, false)
+            .map(|n| mse_rows(&(r - n.fit(r, self.cal)), self.ho));
         let mut out = vec![];
         for spec in library.iter().chain(std::iter::once(&EffectSpec::Generic)) {
             if accepted.contains(&spec.name()) && *spec != EffectSpec::Generic {
@@ -787,11 +794,9 @@ impl Loop<'_> {
             let Some(j) = nuisance::fit_jointly(spec, &ctx, r, nu)? else {
                 continue;
             };
-            // the reference is what the nuisance alone would leave, so that a candidate is
-            // credited only with what the re-calibration could not have done by itself
-            let reference = match nu {
-                Some(n) => mse_rows(&(r - n.fit(r, self.cal)), self.ho),
-                None => mse_before,
+            let reference = match (nu, nuisance_only) {
+                (Some(_), Some(mse)) => mse,
+                _ => mse_before,
             };
             let mse = mse_rows(&(r - &j.effect - &j.nuisance), self.ho);
             out.push(Screened {
@@ -839,21 +844,26 @@ impl Loop<'_> {
                 st.var = var;
             }
             let nu = self.nuisance_for(st, false);
+            // each term evaluated once per round (a gap trend costs a contact solve per row)
+            // and replaced when its effect is re-fitted
+            let mut terms = self.contributions(st)?;
             for k in 0..st.effects.len() {
                 let ctx = self.context(st);
                 let mut r = self.y - &st.mean;
-                for (j, e) in st.effects.iter().enumerate() {
+                for (j, c) in terms.iter().enumerate() {
                     if j != k {
-                        r -= effects::contribution(e, &ctx)?;
+                        r -= c;
                     }
                 }
                 let spec = st.effects[k].spec.clone();
                 if let Some(j) = nuisance::fit_jointly(&spec, &ctx, &r, nu)? {
+                    terms[k] = j.effect;
                     st.effects[k] = j.fitted;
                 }
             }
-            let moved = mse_rows(&(self.effect_sum(st)? - &given), self.cal).sqrt();
-            let resid = mse_rows(&self.residual(st)?, self.cal).sqrt();
+            let sum = sum_terms(&terms, self.y.shape());
+            let moved = mse_rows(&(&sum - &given), self.cal).sqrt();
+            let resid = mse_rows(&(self.y - &st.mean - &sum), self.cal).sqrt();
             if has_gap || moved <= BACKFIT_TOL * resid {
                 return Ok(true);
             }
@@ -861,15 +871,28 @@ impl Loop<'_> {
         Ok(false)
     }
 
+    /// Each accepted effect's contribution at every row (microstrain).
+    fn contributions(&self, st: &State) -> Result<Vec<DMatrix<f64>>, BamudiError> {
+        let ctx = self.context(st);
+        st.effects
+            .iter()
+            .map(|e| effects::contribution(e, &ctx))
+            .collect()
+    }
+
     /// The sum of the accepted effects' contributions at every row (microstrain).
     fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>, BamudiError> {
-        let ctx = self.context(st);
-        let mut sum = DMatrix::zeros(self.y.nrows(), self.y.ncols());
-        for e in &st.effects {
-            sum += effects::contribution(e, &ctx)?;
-        }
-        Ok(sum)
+        Ok(sum_terms(&self.contributions(st)?, self.y.shape()))
     }
+}
+
+/// `terms` added in order to a zero matrix of `shape`.
+fn sum_terms(terms: &[DMatrix<f64>], shape: (usize, usize)) -> DMatrix<f64> {
+    let mut sum = DMatrix::zeros(shape.0, shape.1);
+    for t in terms {
+        sum += t;
+    }
+    sum
 }
 
 /// Most calibrations in one back-fit.

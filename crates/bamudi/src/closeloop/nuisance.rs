@@ -122,12 +122,13 @@ pub(crate) fn fit_jointly(
             Some(l) => select_rows(&(&effect + &n_new - &l.effect - &l.nuisance), ctx.cal).norm(),
             None => f64::INFINITY,
         };
-        n_c = n_new.clone();
-        last = Some(JointFit {
+        let joint = JointFit {
             fitted,
             effect,
             nuisance: n_new,
-        });
+        };
+        n_c.copy_from(&joint.nuisance);
+        last = Some(joint);
         if moved <= ALTERNATION_TOL * scale {
             break;
         }
