@@ -5,7 +5,10 @@
 #[path = "../../crates/mlmodel/tests/apps/beam_app.rs"]
 mod beam_app;
 
-use bamudi::{CalibrationConfig, EstimatorConfig, Experiments, calibrate};
+#[path = "e2e/invariants.rs"]
+mod invariants;
+
+use bamudi::{CalibrationParams, EstimatorParams, Experiments, RidgeParams, calibrate};
 use beam_app::*;
 use mlmodel::{LinearObservableModel, UnobservableModel};
 
@@ -36,9 +39,10 @@ fn check_calibration(
     rho_tol: f64,
     theta_tol: Option<f64>,
 ) {
-    let rho = cal.rho.rho_star;
+    let rho = cal.rho_star();
+    let (m2, m3) = (cal.module2(), cal.module3());
     if std::env::var_os("BAMUDI_DEBUG").is_some() {
-        for p in cal.rho.grid.iter().step_by(10) {
+        for p in m2.rho.grid.iter().step_by(10) {
             eprintln!(
                 "rho {:.2} J {:.3} S {:.3}",
                 p.rho, p.objective, p.sum_squares
@@ -46,10 +50,10 @@ fn check_calibration(
         }
         eprintln!(
             "post with {:?} {:?} without {:?} {:?}",
-            cal.posterior.mean(),
-            cal.posterior.ci95(),
-            cal.posterior_no_discrepancy.mean(),
-            cal.posterior_no_discrepancy.ci95()
+            m3.posterior.mean(),
+            m3.posterior.ci95(),
+            m3.posterior_no_discrepancy.mean(),
+            m3.posterior_no_discrepancy.ci95()
         );
     }
     // ρ is only identified up to the compensation between ρ, θ and δ (the paper finds 0.74
@@ -57,7 +61,7 @@ fn check_calibration(
     // smears the reaction peak at the gap edge and pushes ρ* up (to the search bound 1.0 on
     // this data set); `rho_tol` states the accepted level.
     assert!((rho - RHO_TRUE).abs() < rho_tol, "rho* = {rho}");
-    let post = &cal.posterior;
+    let post = &m3.posterior;
     let ci = post.ci95()[0];
     match theta_tol {
         None => assert!(
@@ -72,7 +76,7 @@ fn check_calibration(
         ),
     }
     let with = (post.mean()[0] - THETA_STAR_IN).abs();
-    let without = (cal.posterior_no_discrepancy.mean()[0] - THETA_STAR_IN).abs();
+    let without = (m3.posterior_no_discrepancy.mean()[0] - THETA_STAR_IN).abs();
     assert!(
         with < without,
         "with discrepancy |err| {with} not below without {without}"
@@ -80,7 +84,8 @@ fn check_calibration(
 
     // Module 4 at new inputs (Fig. 17-20): strains and reactions, BA-MUDI vs the uncorrected
     // model (ρ = 1, no δ, θ at the no-discrepancy posterior mean).
-    let theta_nd = cal.posterior_no_discrepancy.mean();
+    let theta_nd = m3.posterior_no_discrepancy.mean();
+    let predictor = cal.predictor(model).unwrap();
     let mut g = Normal64::new(4242);
     let (mut strain_err, mut strain_err_nd, mut strain_disc) = (Vec::new(), Vec::new(), Vec::new());
     let (mut resp_err, mut resp_err_nd) = (Vec::new(), Vec::new());
@@ -112,14 +117,14 @@ fn check_calibration(
         };
         let (s_true, s_nd) = (strain(&truth), strain(&nd));
         let a_delta = model.observable.matrix() * nalgebra::DVector::from_column_slice(&delta);
-        let band = cal.predict_outputs(model, &x).unwrap();
+        let band = predictor.outputs(&x).unwrap();
         for p in 0..7 {
             strain_err.push(band.mean[p] - s_true[p]);
             strain_err_nd.push(s_nd[p] - s_true[p]);
             strain_disc.push(a_delta[p]);
             assert!(band.lower[p] <= band.mean[p] + 1e-9 && band.mean[p] <= band.upper[p] + 1e-9);
         }
-        let resp = cal.predict_response(model, &x).unwrap();
+        let resp = predictor.response(&x).unwrap();
         for b in 0..41 {
             resp_err.push(resp.mean[b] - truth[b]);
             resp_err_nd.push(nd[b] - truth[b]);
@@ -160,42 +165,47 @@ fn check_calibration(
 fn beam_calibration_with_the_exact_estimator_recovers_the_truth() {
     let model = beam_model(PRIOR_IN, TERMS);
     let exps = experiments(60, 1);
-    let cfg = CalibrationConfig::default()
-        .estimator(EstimatorConfig::ExactLinear)
+    let cfg = CalibrationParams::default()
+        .estimator(EstimatorParams::ExactLinear)
         .sigma_eps(Some(SIGMA_MICROSTRAIN))
         .theta_grid_points(101)
         .gp_restarts(1)
-        .progress(false)
-        .seed(3);
+        .seed(3)
+        .check()
+        .unwrap();
     let cal = calibrate(&model, &exps, &cfg).unwrap();
     check_calibration(&cal, &model, 0.21, None);
     // the grid posterior is a density
-    if let bamudi::ThetaPosterior::Grid(g) = &cal.posterior {
+    if let bamudi::ThetaPosterior::Grid(g) = &cal.module3().posterior {
         assert!((g.cdf.last().unwrap() - 1.0).abs() < 1e-12);
     }
     // serialisable, and the same seed reproduces the same numbers
     let path = std::env::temp_dir().join(format!("bamudi_e2e_{}.json", std::process::id()));
     cal.save(&path).unwrap();
     let back = bamudi::Calibration::load(&path).unwrap();
-    assert_eq!(back.rho, cal.rho);
+    assert_eq!(back.module2().rho, cal.module2().rho);
     let again = calibrate(&model, &exps, &cfg).unwrap();
-    assert_eq!(again.posterior, cal.posterior);
+    assert_eq!(again.module3().posterior, cal.module3().posterior);
+    // Module 4 refuses a model that is not the calibrated one
+    let other = beam_model(PRIOR_IN, TERMS + 1);
+    assert!(back.predictor(&other).is_err());
 }
 
 #[test]
 fn beam_calibration_with_the_smartcore_ridge_estimator() {
     let model = beam_model(PRIOR_IN, TERMS);
     let exps = experiments(60, 2);
-    let cfg = CalibrationConfig::default()
-        .estimator(EstimatorConfig::Ridge { lambda: 1e-6 })
+    let cfg = CalibrationParams::default()
+        .estimator(EstimatorParams::Ridge(RidgeParams { lambda: 1e-6 }))
         .training_size(3000)
         .sigma_eps(Some(SIGMA_MICROSTRAIN))
         .theta_grid_points(101)
         .gp_restarts(1)
-        .progress(false)
-        .seed(4);
+        .seed(4)
+        .check()
+        .unwrap();
     let cal = calibrate(&model, &exps, &cfg).unwrap();
-    assert_eq!(cal.training_pool_size, 300);
+    assert_eq!(cal.module2().training_pool_size, 300);
     // 1 in = 5% of the prior width
     check_calibration(&cal, &model, 0.21, Some(1.0));
 }
@@ -206,17 +216,18 @@ fn rho_is_recovered_when_theta_is_nearly_known() {
     // confounding left is the part of δ outside the span of the Legendre basis.
     let model = beam_model((THETA_STAR_IN - 0.1, THETA_STAR_IN + 0.1), TERMS);
     let exps = experiments(60, 5);
-    let cfg = CalibrationConfig::default()
-        .estimator(EstimatorConfig::ExactLinear)
+    let cfg = CalibrationParams::default()
+        .estimator(EstimatorParams::ExactLinear)
         .sigma_eps(Some(SIGMA_MICROSTRAIN))
         .theta_grid_points(21)
         .gp_restarts(0)
-        .progress(false);
+        .check()
+        .unwrap();
     let cal = calibrate(&model, &exps, &cfg).unwrap();
-    let rho = cal.rho.rho_star;
+    let rho = cal.rho_star();
     // Standard error of ρ from the curvature of the sum of squares S(ρ) ≈ S_min + c (ρ − ρ̂)²:
     // sd(ρ̂) ≈ σ_ε / √c. Allow three standard errors.
-    let g = &cal.rho.grid;
+    let g = &cal.module2().rho.grid;
     let (a, m, b) = (g[50].sum_squares, g[70].sum_squares, g[90].sum_squares);
     let c = (a - 2.0 * m + b) / (2.0 * 0.2f64.powi(2));
     let sd = SIGMA_MICROSTRAIN / c.sqrt();

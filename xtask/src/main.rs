@@ -10,7 +10,8 @@ mod calculix;
 mod plots;
 
 use anyhow::{Context, Result};
-use bamudi::paper::{self, ReproduceOptions};
+use bamudi_gate::paper::{self, ReproduceOptions};
+use bamudi_gate::progress::Bars;
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -108,7 +109,13 @@ fn reproduce(
     opts.sensitivity = (opts.sensitivity || sensitivity) && !no_sensitivity;
     opts.progress = std::env::var_os("CI").is_none();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let report = paper::reproduce(&opts, |res, cal, model| {
+    bamudi_gate::progress::init_logging(false);
+    let bars = if opts.progress {
+        Bars::new()
+    } else {
+        Bars::hidden()
+    };
+    let report = paper::reproduce(&opts, &bars, |res, cal, model| {
         eprintln!(
             "{}: rho* = {:.3}, theta = {:.2} ± {:.2} (truth {})",
             res.name,
@@ -117,8 +124,11 @@ fn reproduce(
             res.theta_posterior.sd,
             res.theta_true
         );
-        plots::scenario_plots(&out, res, cal, model)
-            .map_err(|e| bamudi::BamudiError::Calibration(format!("plots: {e:#}")))
+        plots::scenario_plots(&out, res, cal, model).map_err(|e| {
+            bamudi_gate::GateAppError::Engine(bamudi::BamudiError::Calibration(format!(
+                "plots: {e:#}"
+            )))
+        })
     })?;
     let md = report.markdown();
     println!("{md}");

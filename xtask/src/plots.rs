@@ -2,14 +2,15 @@
 //!
 //! Per scenario directory: `results.json`, `report.md`, `rho_curve.svg` (Fig. 13),
 //! `gp_coefficients.svg` (Fig. 14) and `theta_posterior.svg` (Fig. 16) from
-//! `bamudi::report::write_report`; here `discrepancy.svg` (Fig. 15), `forces.svg` (Fig. 17),
+//! `bamudi_gate::report::calibration::write_report`; here `discrepancy.svg` (Fig. 15), `forces.svg` (Fig. 17),
 //! `normal_force_error.svg` (Fig. 18), `strain_errors.svg` (Fig. 19/20) and
 //! `force_history.svg` (Fig. 21/22).
 
 use anyhow::{Result, anyhow};
 use bamudi::Calibration;
-use bamudi::paper::{GateMultiLevel, ScenarioResult};
-use mitergate::truth::{self, Scenario};
+use bamudi_gate::paper::ScenarioResult;
+use mitergate::GateMultiLevel;
+use mitergate::data::truth::{self, Scenario};
 use mlmodel::UnobservableModel;
 use plotters::prelude::*;
 use std::path::Path;
@@ -111,10 +112,10 @@ pub fn scenario_plots(
     model: &GateMultiLevel,
 ) -> Result<()> {
     let dir = out.join(res.name.replace(' ', "-"));
-    bamudi::report::write_report(cal, model.prior.as_ref(), &dir)?;
+    bamudi_gate::report::calibration::write_report(cal, model.prior.as_ref(), &dir)?;
     let number = if res.theta_true < 120.0 { 1 } else { 2 };
     let scenario = Scenario::paper(number)?;
-    let contact = model.unobservable.contact();
+    let contact = model.unobservable.inner().contact();
     let d = contact.gate().nu_points.clone();
     let nu = d.len();
     // The paper's plotting conditions (Fig. 15, 17): (738, 360) for S1, (426, 120) for S2.
@@ -125,8 +126,8 @@ pub fn scenario_plots(
     };
     let truth_f = truth::true_forces(&scenario, contact, x)?;
     let delta = truth::true_discrepancy(x, &d, scenario.theta_true, scenario.discrepancy_scale);
-    let disc = cal.predict_discrepancy(&x)?;
-    let resp = cal.predict_response(model, &x)?;
+    let disc = cal.predictor(model)?.discrepancy(&x)?;
+    let resp = cal.predictor(model)?.response(&x)?;
     let before = prior_mean(model, &x)?;
     for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         let r = c * nu..(c + 1) * nu;
@@ -188,7 +189,7 @@ fn normal_force_error(
     scenario: &Scenario,
     number: u8,
 ) -> Result<()> {
-    let contact = model.unobservable.contact();
+    let contact = model.unobservable.inner().contact();
     let nu = contact.gate().n_points();
     let (levels, xs): (Vec<f64>, Vec<[f64; 2]>) = if number == 1 {
         let l: Vec<f64> = (0..25).map(|i| 24.0 + 690.0 * i as f64 / 24.0).collect();
@@ -201,7 +202,7 @@ fn normal_force_error(
     for x in &xs {
         let t = truth::true_forces(scenario, contact, *x)?;
         let b = prior_mean(model, x)?;
-        let a = cal.predict_response(model, x)?.mean;
+        let a = cal.predictor(model)?.response(x)?.mean;
         let r =
             |p: &[f64]| ((0..nu).map(|i| (p[i] - t[i]).powi(2)).sum::<f64>() / nu as f64).sqrt();
         eb.push(r(&b));
@@ -232,7 +233,7 @@ fn force_history(
     model: &GateMultiLevel,
     scenario: &Scenario,
 ) -> Result<()> {
-    let contact = model.unobservable.contact();
+    let contact = model.unobservable.inner().contact();
     let d = &contact.gate().nu_points;
     let nu = d.len();
     let a_idx = d.partition_point(|&z| z < 0.25 * contact.gate().quoin_height);
@@ -246,7 +247,7 @@ fn force_history(
         ];
         let t = truth::true_forces(scenario, contact, x)?;
         let b = prior_mean(model, &x)?;
-        let a = cal.predict_response(model, &x)?;
+        let a = cal.predictor(model)?.response(&x)?;
         for (c, off) in [(0usize, 0usize), (3, nu)] {
             cols[c].push(t[off + a_idx]);
             cols[c + 1].push(b[off + a_idx]);

@@ -1,6 +1,6 @@
 //! Criterion benchmarks for `bamudi`: the Module-3 likelihood (Eq. 40/51) at one `θ` for
 //! `N_e = 500`, `N_o = 7` (`N_s = 3500`), and the one-off Cholesky factorisation of `V`.
-use bamudi::likelihood::{FactoredCovariance, assemble_covariance};
+use bamudi::module3::likelihood::{FactoredCovariance, assemble_covariance};
 use criterion::Criterion;
 use nalgebra::DMatrix;
 
@@ -32,14 +32,14 @@ pub fn benches(c: &mut Criterion) {
     });
     let v = assemble_covariance(&b, &covs, 1.0).unwrap();
     g.bench_function("cholesky_V_3500", |bench| {
-        bench.iter(|| FactoredCovariance::new(v.clone(), "V").unwrap())
+        bench.iter(|| FactoredCovariance::new(&v, "V").unwrap())
     });
-    let f = FactoredCovariance::new(v, "V").unwrap();
+    let f = FactoredCovariance::new(&v, "V").unwrap();
     let r: Vec<f64> = (0..3500)
         .map(|i| ((i * 37) % 101) as f64 / 101.0 - 0.5)
         .collect();
     g.bench_function("loglik_one_theta_3500", |bench| {
-        bench.iter(|| f.log_density(&r, bamudi::likelihood::Par::Seq).unwrap())
+        bench.iter(|| f.log_density(&r).unwrap())
     });
     g.finish();
 }

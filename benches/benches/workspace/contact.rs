@@ -1,9 +1,9 @@
 //! Criterion benchmarks for the quoin contact model `g_BC(x, θ)` (`mitergate::contact`) on the
 //! default gate (12 in mesh, N_u = 509).
 use criterion::Criterion;
-use mitergate::condensed::CondensedGate;
+use mitergate::CondensedGate;
 use mitergate::contact::ContactParams;
-use mitergate::truth::sample_levels;
+use mitergate::data::truth::sample_levels;
 use std::hint::black_box;
 
 /// The gate the benchmarks run on.

@@ -7,17 +7,15 @@
 //!   a full 50,000-sample epoch takes `50_000 / throughput` seconds. Full epochs side by side with
 //!   PyTorch: `scripts/lstm_bench.sh`.
 //! * `seqnet/batch_grad_*`: one forward + BPTT backward of a 256-sample batch, with faer's GEMM
-//!   sequential (`Par::Seq`) or on 2 rayon threads, to choose the GEMM parallelism.
+//!   sequential or on 2 rayon threads, to choose the GEMM parallelism.
 use criterion::{Criterion, Throughput};
 use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
-use seqnet::{LstmParams, LstmShape, Network, Par, Precision, Workspace};
+use seqnet::{LstmParams, LstmShape, Network, Precision, Workspace};
 use std::hint::black_box;
 
 fn gaussian(rng: &mut StdRng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>();
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    numerics::random::standard_normal(rng)
 }
 
 /// The anchor recipe: `Y = X A + tanh(X B) + 0.1 noise`, X standard normal.
@@ -42,7 +40,6 @@ fn params(steps: usize, precision: Precision, threads: usize) -> LstmParams {
         .patience(0)
         .precision(precision)
         .threads(threads)
-        .progress(false)
 }
 
 /// Registers the `seqnet` benchmarks.
@@ -70,11 +67,11 @@ pub fn benches(c: &mut Criterion) {
     let xb: Vec<f32> = (0..256 * 10).map(|_| rng.random_range(-1.0..1.0)).collect();
     let yb: Vec<f32> = (0..256 * 12).map(|_| rng.random_range(-1.0..1.0)).collect();
     let mut grad = vec![0.0f32; shape.n_params()];
-    for (name, par) in [
-        ("batch_grad_seq10x1_f32_gemm_seq", Par::Seq),
-        ("batch_grad_seq10x1_f32_gemm_rayon2", Par::rayon(2)),
+    for (name, threads) in [
+        ("batch_grad_seq10x1_f32_gemm_seq", 1),
+        ("batch_grad_seq10x1_f32_gemm_rayon2", 2),
     ] {
-        let mut ws = Workspace::with_par(par);
+        let mut ws = Workspace::with_gemm_threads(threads);
         group.bench_function(name, |b| {
             b.iter(|| {
                 net.loss_and_gradient(black_box(&xb), black_box(&yb), 256, &mut grad, &mut ws)

@@ -21,12 +21,12 @@ pub enum BamudiError {
         /// Size received.
         got: usize,
     },
-    /// A CSV file is malformed; `row` is 1-based counting the header as row 1.
-    #[error("{file}: row {row}, column `{column}`: {reason}")]
+    /// A CSV file is malformed; `row` is the file line (the header is line 1).
+    #[error("{file}: line {row}, column `{column}`: {reason}")]
     Csv {
         /// File path.
         file: String,
-        /// 1-based row (the header is row 1); 0 when the problem is not tied to a row.
+        /// File line (the header is line 1); 0 when the problem is not tied to a line.
         row: usize,
         /// Column name (or `-`).
         column: String,
@@ -56,6 +56,9 @@ pub enum BamudiError {
         /// Which matrix.
         what: String,
     },
+    /// A shared numerical kernel failed (Cholesky past its jitter ladder, ...).
+    #[error(transparent)]
+    Numerics(#[from] numerics::NumericsError),
     /// A numerical step failed.
     #[error("numerical failure in {context}: {reason}")]
     Numerical {
@@ -78,7 +81,7 @@ pub enum BamudiError {
         /// The GP error message.
         reason: String,
     },
-    /// The coefficient estimator (LSTM, smartcore) failed.
+    /// The coefficient estimator (LSTM, smartcore ridge) failed.
     #[error("coefficient estimator `{estimator}`: {reason}")]
     Estimator {
         /// Estimator name.
@@ -97,17 +100,6 @@ pub enum BamudiError {
     /// A calibration (through the close-the-loop `Calibrator` interface) failed.
     #[error("calibration failed: {0}")]
     Calibration(String),
-    /// The application model (e.g. the miter gate) failed to build or evaluate.
-    #[error("application model: {0}")]
-    Application(String),
-    /// Plotting failed.
-    #[error("plot {file}: {reason}")]
-    Plot {
-        /// SVG file.
-        file: String,
-        /// Message.
-        reason: String,
-    },
 }
 
 /// Result alias.
@@ -115,14 +107,14 @@ pub type Result<T> = std::result::Result<T, BamudiError>;
 
 impl BamudiError {
     /// Shorthand for [`BamudiError::InvalidConfig`].
-    pub(crate) fn config(name: &'static str, reason: impl Into<String>) -> Self {
+    pub fn config(name: &'static str, reason: impl Into<String>) -> Self {
         Self::InvalidConfig {
             name,
             reason: reason.into(),
         }
     }
     /// Shorthand for [`BamudiError::Dimension`].
-    pub(crate) fn dim(what: impl Into<String>, expected: usize, got: usize) -> Self {
+    pub fn dim(what: impl Into<String>, expected: usize, got: usize) -> Self {
         Self::Dimension {
             what: what.into(),
             expected,

@@ -48,9 +48,10 @@
 //!   [`GpParams::restarts`] log-uniform random starts from an explicit [`GpParams::seed`].
 //!   The best optimum wins; every start is reported in [`GpModel::diagnostics`].
 //! * **Jitter.** If `K` is numerically not positive definite, a diagonal jitter of
-//!   1e-10 … 1e-4 times its mean diagonal is tried in decades; the jitter used by the final
-//!   model is reported in [`FitDiagnostics::jitter`] (never silent). Beyond that the fit fails
-//!   with [`GpError::NotPositiveDefinite`].
+//!   1e-10 … 1e-4 times its mean diagonal is tried in decades (the workspace's shared ladder,
+//!   `numerics::JITTER_LADDER`, applied by `numerics::cholesky::cholesky_in_place`); the jitter
+//!   used by the final model is reported in [`FitDiagnostics::jitter`] (never silent). Beyond
+//!   that the fit fails with [`GpError::NotPositiveDefinite`].
 //! * **Log marginal likelihood units.** [`GpModel::log_marginal_likelihood`] is for the data in
 //!   original output units (standardised value − `(n − p) ln s_y`);
 //!   [`GpModel::log_marginal_likelihood_standardized`] is the optimised value (equal to
@@ -83,10 +84,16 @@
 //! [`BoundedLml`] (the bounded version the fit optimises) are public for reuse and testing.
 //!
 //! # Performance
-//! Dense linear algebra uses faer (Cholesky, triangular solves, `K⁻¹` for the gradient);
+//! Dense linear algebra uses faer (Cholesky, triangular solves, `K⁻¹` for the gradient), as an
+//! implementation detail: no faer type appears in this crate's public API;
 //! each likelihood evaluation costs one Cholesky, and each gradient one inverse from the
 //! factor plus a single O(n² d) pass, with all `n × n` buffers reused across evaluations.
 //! Benchmarks against scikit-learn are in `docs/benchmarks.md` (## gp).
+
+/// The crate README's example, compiled and run as a doc test.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctest;
 
 mod error;
 mod kernel;

@@ -84,6 +84,27 @@ struct Workspace {
     last_grad: Option<(Vec<f64>, Vec<f64>)>,
 }
 
+impl Workspace {
+    /// Buffers for `n` points and `p` regression coefficients (`gfac` only for Matérn, whose
+    /// length-scale derivative factor differs from the correlation).
+    fn new(n: usize, p: usize, matern: bool) -> Self {
+        let par = Par::Seq;
+        let req = StackReq::any_of(&[
+            numerics::cholesky::scratch(n, par),
+            llt::inverse::inverse_scratch::<f64>(n, par),
+        ]);
+        Self {
+            kf: Mat::zeros(n, n),
+            gfac: Mat::zeros(if matern { n } else { 0 }, n),
+            kinv: Mat::zeros(n, n),
+            tmp_np: Mat::zeros(n, p),
+            mem: MemBuffer::new(req),
+            last: None,
+            last_grad: None,
+        }
+    }
+}
+
 /// The log-marginal-likelihood problem for fixed training data: an argmin [`CostFunction`]
 /// (negative LML) and [`Gradient`] over the log hyper-parameters (see module docs).
 ///
@@ -167,27 +188,7 @@ impl LmlProblem {
             }
         }
         let half_logdet_hth = half_logdet_gram(&h)?;
-        let par = Par::Seq;
-        let req = StackReq::any_of(&[
-            llt::factor::cholesky_in_place_scratch::<f64>(n, par, Default::default()),
-            llt::inverse::inverse_scratch::<f64>(n, par),
-        ]);
-        let ws = Workspace {
-            kf: Mat::zeros(n, n),
-            gfac: Mat::zeros(
-                if matches!(kernel, Kernel::Matern52 { .. }) {
-                    n
-                } else {
-                    0
-                },
-                n,
-            ),
-            kinv: Mat::zeros(n, n),
-            tmp_np: Mat::zeros(n, p),
-            mem: MemBuffer::new(req),
-            last: None,
-            last_grad: None,
-        };
+        let ws = Workspace::new(n, p, matches!(kernel, Kernel::Matern52 { .. }));
         Ok(Self {
             kernel,
             mean,

@@ -1,67 +1,58 @@
-//! Small dense linear-algebra helpers on top of faer (large `n × n` work) and plain slices
-//! (the tiny `p × p` GLS normal matrix).
+//! Small dense linear-algebra helpers: the jittered Cholesky of the `n × n` training covariance
+//! (the shared kernel of `numerics`, on faer) and plain-slice routines for the tiny `p × p` GLS
+//! normal matrix.
 
 use crate::GpError;
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::cholesky::llt::factor::{LltRegularization, cholesky_in_place};
-use faer::{Mat, MatMut, MatRef, Par};
+use faer::dyn_stack::MemBuffer;
+use faer::{Mat, MatRef, Par};
+use numerics::NumericsError;
 
-/// Relative diagonal jitters tried, in order, when the training covariance is not numerically
-/// positive definite. Each is multiplied by the mean diagonal of `K`. The first (zero) means
-/// "no jitter"; the largest (1e-4 of the mean variance) is far below any noise level a user
-/// would care about but well above rounding-level negative eigenvalues.
-pub(crate) const JITTER_LADDER: [f64; 8] = [0.0, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4];
+/// Name of the training covariance in errors.
+const TRAINING_COV: &str = "K (training covariance)";
 
-/// Copies the lower triangle of `k` into `out`, adds `diag_add + jitter` on the diagonal and
-/// factorises `out = L Lᵀ` in place, escalating the jitter along [`JITTER_LADDER`].
-/// Returns the absolute jitter that was needed (0 if none).
+/// Factorises the training covariance `out = L Lᵀ = K + (diag_add + jitter) I` in place with
+/// [`numerics::cholesky::cholesky_in_place`] (sequential faer kernel), escalating the jitter
+/// along [`numerics::JITTER_LADDER`] (relative to the mean diagonal of `K + diag_add I`).
+/// Only the lower triangle of `k` is read; the strict upper triangle of `out` is zeroed.
+/// Returns the absolute jitter that was needed (0 if none); past the top of the ladder the
+/// error is [`GpError::NotPositiveDefinite`] with the failing pivot.
 pub(crate) fn cholesky_with_jitter(
     k: MatRef<'_, f64>,
     diag_add: f64,
     out: &mut Mat<f64>,
     stack_buf: &mut MemBuffer,
 ) -> Result<f64, GpError> {
-    let n = k.nrows();
-    let mean_diag = (0..n).map(|i| k[(i, i)]).sum::<f64>() / n as f64 + diag_add;
-    let mut last_index = 0;
-    for rel in JITTER_LADDER {
-        let jitter = rel * mean_diag.abs();
-        out.copy_from(k);
-        for i in 0..n {
-            out[(i, i)] += diag_add + jitter;
-        }
-        let stack = MemStack::new(stack_buf);
-        match cholesky_in_place(
-            out.as_mut(),
-            LltRegularization::default(),
-            Par::Seq,
-            stack,
-            Default::default(),
-        ) {
-            Ok(_) => {
-                zero_strict_upper(out.as_mut());
-                return Ok(jitter);
+    let n = k.nrows().max(1);
+    numerics::cholesky::cholesky_in_place(k, diag_add, out, stack_buf, Par::Seq, TRAINING_COV)
+        .map_err(|e| match e {
+            NumericsError::NotPositiveDefinite {
+                index, max_jitter, ..
+            } => GpError::NotPositiveDefinite {
+                matrix: TRAINING_COV,
+                index,
+                max_jitter,
+            },
+            NumericsError::Dimension { expected, got, .. } => GpError::ShapeMismatch {
+                name: TRAINING_COV,
+                what: "columns",
+                expected,
+                found: got,
+            },
+            // (the in-place kernel does not scan for non-finite entries; mapped for completeness)
+            NumericsError::NonFinite { index, .. } => {
+                let (row, col) = (index % n, index / n);
+                GpError::NonFinite {
+                    name: TRAINING_COV,
+                    row,
+                    col,
+                    value: if col < k.ncols() {
+                        k[(row, col)]
+                    } else {
+                        f64::NAN
+                    },
+                }
             }
-            Err(faer::linalg::cholesky::llt::factor::LltError::NonPositivePivot { index }) => {
-                last_index = index;
-            }
-        }
-    }
-    Err(GpError::NotPositiveDefinite {
-        matrix: "K (training covariance)",
-        index: last_index,
-        max_jitter: JITTER_LADDER[JITTER_LADDER.len() - 1] * mean_diag.abs(),
-    })
-}
-
-/// Sets the strict upper triangle to zero so the factor can be used as a dense triangle.
-fn zero_strict_upper(mut m: MatMut<'_, f64>) {
-    let n = m.nrows();
-    for j in 1..n {
-        for i in 0..j {
-            m[(i, j)] = 0.0;
-        }
-    }
+        })
 }
 
 /// In-place Cholesky of a small column-major `p × p` matrix (lower factor, upper zeroed).
@@ -110,5 +101,43 @@ pub(crate) fn small_backward_solve(l: &[f64], p: usize, b: &mut [f64]) {
             s -= l[k + i * p] * b[k];
         }
         b[i] = s / l[i + i * p];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn indefinite_training_covariance_maps_to_gp_error() {
+        // diag(1, -1): pivot 1 fails on every rung of the ladder
+        let k = Mat::from_fn(2, 2, |i, j| match (i, j) {
+            (0, 0) => 1.0,
+            (1, 1) => -1.0,
+            _ => 0.0,
+        });
+        let mut out = Mat::zeros(2, 2);
+        let mut buf = MemBuffer::new(numerics::cholesky::scratch(2, Par::Seq));
+        let err = cholesky_with_jitter(k.as_ref(), 0.0, &mut out, &mut buf).unwrap_err();
+        // mean diagonal 0: the top of the ladder is a zero jitter
+        assert_eq!(
+            err,
+            GpError::NotPositiveDefinite {
+                matrix: TRAINING_COV,
+                index: 1,
+                max_jitter: 0.0,
+            }
+        );
+    }
+
+    #[test]
+    fn rank_one_covariance_is_rescued_by_a_reported_jitter() {
+        let k = Mat::from_fn(3, 3, |i, j| ((i + 1) * (j + 1)) as f64);
+        let mut out = Mat::zeros(3, 3);
+        let mut buf = MemBuffer::new(numerics::cholesky::scratch(3, Par::Seq));
+        let jitter = cholesky_with_jitter(k.as_ref(), 0.0, &mut out, &mut buf).unwrap();
+        let mean_diag = 14.0 / 3.0;
+        assert!(jitter > 0.0 && jitter <= 1e-4 * mean_diag, "{jitter}");
+        assert_eq!(out[(0, 1)], 0.0); // strict upper triangle zeroed
     }
 }

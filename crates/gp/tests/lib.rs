@@ -14,3 +14,6 @@ mod fitting;
 
 #[path = "lib/errors.rs"]
 mod errors;
+
+#[path = "lib/reproducibility.rs"]
+mod reproducibility;

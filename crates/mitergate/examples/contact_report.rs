@@ -2,22 +2,19 @@
 //! visibility of the paper's discrepancy (Eq. 53-54) through the gauges.
 //!
 //! `cargo run --release -p mitergate --example contact_report`
-use mitergate::contact::ContactParams;
-use mitergate::truth::{self, Scenario};
-use mitergate::{GateConfig, GateModel};
+use mitergate::data::truth::{self, Scenario};
+use mitergate::{GateConfig, build_contact};
 use std::time::Instant;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
-    let model = GateModel::build(&GateConfig::default())?;
-    let gate = model.condense(mitergate::DEFAULT_NU)?;
+    let (contact, summary) = build_contact(&GateConfig::default())?;
     println!(
         "build + condense: {:.2} s, {} dofs, {} quoin nodes",
         t.elapsed().as_secs_f64(),
-        model.n_dofs(),
-        gate.n_quoin_nodes()
+        summary.n_dofs,
+        summary.n_quoin_nodes
     );
-    let contact = ContactParams::default().build(gate)?;
     let xs = truth::sample_levels(200, 7);
     for theta in [0.0, 90.0, 150.0] {
         let t = Instant::now();

@@ -24,7 +24,17 @@
 //! Nothing here is specific to miter gates: `tests/lib.rs` of this crate implements the traits
 //! for a beam on an elastic foundation.
 
+/// The crate README's example, compiled and run as a doc test.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctest;
+
+mod memo;
+
+pub use memo::Memo;
+
 use nalgebra::DMatrix;
+use numerics::random::standard_normal;
 use orthopoly::{Basis, Family};
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use serde::{Deserialize, Serialize};
@@ -130,6 +140,14 @@ pub trait UnobservableModel: Send + Sync {
     /// default accepts every `x`.
     fn check_input(&self, x: &[f64]) -> Result<()> {
         check_len("x", x, self.input_dim())
+    }
+
+    /// Whether the response is zero at `x` for every `θ` (e.g. a gate with no head carries no
+    /// contact force). The calibration's Module 4 then sets the discrepancy to zero at `x`: it
+    /// corrects a response that is not there. Default: `false`.
+    fn response_vanishes(&self, x: &[f64]) -> bool {
+        let _ = x;
+        false
     }
 
     /// Number of inputs `x`.
@@ -369,13 +387,6 @@ impl Prior for NormalPrior {
             .map(|&(m, s)| (m - 5.0 * s, m + 5.0 * s))
             .collect()
     }
-}
-
-/// A standard normal draw by Box-Muller (keeps this crate free of `rand_distr`).
-fn standard_normal(rng: &mut StdRng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
 /// Tensor product of one-dimensional rules given as (node, weight) lists.

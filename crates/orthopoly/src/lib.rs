@@ -66,6 +66,11 @@
 //! rule of a basis's own probability measure, under which an orthonormal basis is exactly
 //! orthonormal.
 
+/// The crate README's example, compiled and run as a doc test.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctest;
+
 mod basis;
 mod error;
 mod family;

@@ -47,7 +47,6 @@ fn main() {
         .precision(precision)
         .threads(threads)
         .seed(0)
-        .progress(false)
         .fit(&x_tr, &y_tr)
         .expect("training succeeds");
     let h = model.history();

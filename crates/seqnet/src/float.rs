@@ -15,12 +15,13 @@ pub enum Precision {
     F64,
 }
 
-/// A real scalar the LSTM kernels can run on (`f32` or `f64`).
+/// A real scalar the LSTM kernels can run on: `f32` or `f64` (the trait is sealed).
 ///
-/// It extends faer's [`faer::traits::RealField`] (needed by faer's matrix multiply) with the few
-/// transcendental functions the gates need.
+/// Besides the conversions and the few transcendental functions the gates need, the kernels
+/// require what faer's matrix multiply needs; that requirement sits on a private supertrait,
+/// so no faer type is part of this crate's public API.
 pub trait Float:
-    faer::traits::RealField
+    sealed::Kernel
     + Copy
     + Default
     + Send
@@ -140,6 +141,14 @@ pub fn fast_exp_f64(x: f64) -> f64 {
     }
     let scale = f64::from_bits(v.to_bits().wrapping_sub(MAGIC.to_bits()).wrapping_add(1023) << 52);
     p * scale
+}
+
+mod sealed {
+    /// The faer bound of the GEMM kernels; implemented for `f32` and `f64` only, and not
+    /// nameable outside the crate, which seals [`super::Float`].
+    pub trait Kernel: faer::traits::RealField {}
+    impl Kernel for f32 {}
+    impl Kernel for f64 {}
 }
 
 macro_rules! impl_float {

@@ -10,7 +10,7 @@
 //!
 //! # Model
 //! Each sample's `n_inputs` values are fed as a sequence of `steps` time steps of
-//! `n_inputs / steps` values each ([`LstmParams::steps`]: a sequence of scalars, one step of all
+//! `n_inputs / steps` values each ([`LstmSettings::steps`]: a sequence of scalars, one step of all
 //! features, or anything in between). Each layer is the cell of Eq. 28,
 //!
 //! ```text
@@ -39,15 +39,22 @@
 //! ([`Precision`]).
 //!
 //! # Training
-//! [`LstmParams`] is a validated builder (linfa style); [`LstmParams::fit`] standardises inputs
-//! and outputs (statistics of the training split, stored in the model), holds out a seeded
-//! validation split, and runs seeded mini-batch epochs with Adam or SGD
-//! ([`Optimizer`]), optional global-norm gradient clipping, a learning-rate schedule
-//! ([`LrSchedule`]: constant, step, cosine, reduce-on-plateau), early stopping with restoration
-//! of the best weights, and an indicatif progress bar (only on a terminal, never when `CI=true`).
-//! With `threads(n)` each mini-batch is split into `n` shards whose gradients are summed in a fixed
-//! order, so results depend only on the seed and the thread count. Initialisation: Xavier-uniform
-//! input and head weights, orthogonal recurrent blocks, forget-gate bias 1.
+//! The hyper-parameters are one plain struct, [`LstmSettings`] (serde, every field defaulted,
+//! unknown keys refused: what a configuration file embeds). Fitting follows linfa's pipeline:
+//! [`LstmParams`] (builder: data shape, settings, seed) → [`LstmParams::check`] (validates
+//! once) → [`CheckedLstmParams`] (immutable) → [`CheckedLstmParams::fit`] or
+//! [`CheckedLstmParams::fit_observed`]; [`LstmParams::fit`] does check and fit in one call.
+//!
+//! `fit` holds out a seeded validation split, standardises inputs and outputs (statistics of
+//! the training split, stored in the model; [`numerics::Standardizer`]) and runs seeded
+//! mini-batch epochs with Adam or SGD ([`Optimizer`]), optional global-norm gradient clipping, a
+//! learning-rate schedule ([`LrSchedule`]: constant, step, cosine, reduce-on-plateau) and early
+//! stopping with restoration of the best weights. The library never prints: progress goes to a
+//! [`TrainObserver`], one [`EpochReport`] per epoch ([`NoObserver`] ignores them; closures are
+//! observers). With `threads(n)` each mini-batch is split into `n` shards whose gradients are
+//! summed in a fixed order, so results depend only on the seed and the thread count.
+//! Initialisation: Xavier-uniform input and head weights, orthogonal recurrent blocks,
+//! forget-gate bias 1.
 //!
 //! Bad input is an error, never a panic: non-finite data ([`SeqError::NonFinite`] with row and
 //! column), wrong shapes, invalid hyper-parameters (named), and a loss or gradient that becomes
@@ -59,20 +66,21 @@
 //! # Persistence
 //! [`LstmRegressor::save`] writes JSON with a `format_version` ([`FORMAT_VERSION`]), the shape,
 //! hyper-parameters, weights, scalers and history; [`LstmRegressor::load`] restores it bit for bit
-//! and refuses other versions or inconsistent files with [`SeqError::Format`];
+//! (files of the previous version 1 too) and refuses other versions or inconsistent files with
+//! [`SeqError::Format`];
 //! [`LstmRegressor::load_with_shape`] also checks the expected shape.
 //!
 //! # Example
 //! ```
 //! use nalgebra::DMatrix;
-//! use seqnet::{LstmParams, LrSchedule};
+//! use seqnet::{EpochReport, LstmParams, LrSchedule};
 //! // y = (sin(2 a) b, a^2 - b) from 2 inputs fed as a sequence of 2 scalars.
 //! let x = DMatrix::from_fn(400, 2, |r, c| (((r * 37 + c * 11) % 101) as f64 / 50.0) - 1.0);
 //! let y = DMatrix::from_fn(400, 2, |r, c| {
 //!     let (a, b) = (x[(r, 0)], x[(r, 1)]);
 //!     if c == 0 { (2.0 * a).sin() * b } else { a * a - b }
 //! });
-//! let model = LstmParams::new(2, 2)
+//! let params = LstmParams::new(2, 2)
 //!     .hidden(16)
 //!     .steps(2)
 //!     .epochs(30)
@@ -80,31 +88,46 @@
 //!     .learning_rate(1e-2)
 //!     .schedule(LrSchedule::Cosine { min_factor: 0.1 })
 //!     .seed(7)
-//!     .progress(false)
-//!     .fit(&x, &y)
-//!     .unwrap();
+//!     .check()?;
+//! let mut last = None;
+//! let model = params.fit_observed(&x, &y, &mut |r: &EpochReport| last = Some(r.train_loss))?;
 //! let h = model.history();
+//! assert_eq!(last, h.train_loss.last().copied());
 //! assert!(h.best_loss < 0.1 * h.train_loss[0]);
-//! let yhat = model.predict(&x).unwrap();
+//! let yhat = model.predict(&x)?;
 //! assert_eq!(yhat.shape(), (400, 2));
+//! # Ok::<(), seqnet::SeqError>(())
 //! ```
+//!
+//! # Modules
+//! Dependencies run one way: `settings` (plain data) ← `params` (builder, checks) ←
+//! `train` (fit) → `model` (the trained regressor) → `net` (shape, kernels); `observe`,
+//! `data` (checks, splits, buffers) and `search` sit beside them. No faer type appears in the
+//! public API (the GEMM parallelism of a [`Workspace`] is a thread count).
+/// The crate README's example, compiled and run as a doc test.
+#[doc = include_str!("../README.md")]
+#[cfg(doctest)]
+pub struct ReadmeDoctest;
+
+mod data;
 mod error;
 mod float;
 mod gemm;
 mod model;
 mod net;
+mod observe;
 mod optim;
 mod params;
-mod scaler;
 mod search;
+mod settings;
 mod train;
 
 pub use error::SeqError;
-pub use faer::Par;
 pub use float::{Float, Precision, fast_exp_f32, fast_exp_f64};
 pub use model::{FORMAT_VERSION, LstmRegressor, TrainingHistory};
 pub use net::{LstmShape, Network, Workspace};
+pub use observe::{EpochReport, NoObserver, TrainObserver};
 pub use optim::{LrSchedule, Optimizer};
-pub use params::LstmParams;
-pub use scaler::Standardizer;
+pub use params::{CheckedLstmParams, LstmParams};
 pub use search::{CandidateScore, SearchResult, SearchSpace, select_hyperparameters};
+pub use settings::LstmSettings;

@@ -1,17 +1,33 @@
 //! The trained regressor: prediction in data units, training history, versioned save/load.
 
+use crate::data::{check_matrix, to_row_major};
 use crate::error::SeqError;
 use crate::float::{Float, Precision};
 use crate::net::{LstmShape, Network, Workspace};
-use crate::params::{LstmParams, check_matrix};
-use crate::scaler::Standardizer;
+use crate::params::CheckedLstmParams;
 use nalgebra::DMatrix;
+use numerics::Standardizer;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Version of the JSON file format written by [`LstmRegressor::save`]; bumped on any
-/// incompatible change. Files of another version are refused with [`SeqError::Format`].
-pub const FORMAT_VERSION: u32 = 1;
+/// incompatible change.
+///
+/// * 2 (current): the scalers' standard deviations are named `sd` (the shared
+///   [`numerics::Standardizer`]), and the hyper-parameters have no `progress` flag.
+/// * 1: scalers with `std`, hyper-parameters with `progress`. Still read by
+///   [`LstmRegressor::load`] (the same numbers, bit for bit); never written.
+///
+/// Files of any other version are refused with [`SeqError::Format`].
+pub const FORMAT_VERSION: u32 = 2;
+
+/// Every version [`LstmRegressor::load`] reads (see [`FORMAT_VERSION`]).
+const READABLE_VERSIONS: [u32; 2] = [1, FORMAT_VERSION];
+
+/// The in-memory value is always in the current format, whatever version it was read from.
+fn current_format_version() -> u32 {
+    FORMAT_VERSION
+}
 
 /// Per-epoch record of a training run. Losses are mean squared errors in standardised output
 /// units (so 1.0 is the error of predicting the training mean).
@@ -65,9 +81,10 @@ impl Weights {
 /// network and training history in one serialisable value.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LstmRegressor {
+    #[serde(skip_deserializing, default = "current_format_version")]
     format_version: u32,
     shape: LstmShape,
-    params: LstmParams,
+    params: CheckedLstmParams,
     weights: Weights,
     x_scaler: Standardizer,
     y_scaler: Standardizer,
@@ -79,7 +96,7 @@ const PREDICT_CHUNK: usize = 1024;
 
 impl LstmRegressor {
     pub(crate) fn from_parts(
-        params: LstmParams,
+        params: CheckedLstmParams,
         weights: Weights,
         x_scaler: Standardizer,
         y_scaler: Standardizer,
@@ -102,7 +119,7 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(32, 2, |r, c| (r + c) as f64);
     /// let y = DMatrix::from_fn(32, 1, |r, _| r as f64);
-    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).progress(false).fit(&x, &y).unwrap();
+    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).fit(&x, &y).unwrap();
     /// assert_eq!(m.predict(&x).unwrap().shape(), (32, 1));
     /// assert!(m.predict(&DMatrix::zeros(3, 5)).is_err()); // wrong column count
     /// ```
@@ -115,7 +132,7 @@ impl LstmRegressor {
     }
 
     fn predict_typed<T: Float>(&self, net: &Network<T>, x: &DMatrix<f64>) -> DMatrix<f64> {
-        let xs: Vec<T> = self.x_scaler.to_row_major(x);
+        let xs: Vec<T> = to_row_major(&self.x_scaler, x);
         let (n_in, n_out) = (self.shape.n_inputs(), self.shape.n_outputs);
         let mut out = DMatrix::zeros(x.nrows(), n_out);
         let mut ws = Workspace::new();
@@ -126,7 +143,7 @@ impl LstmRegressor {
                 .expect("input buffer is built with the network's shape");
             for r in 0..b {
                 for c in 0..n_out {
-                    out[(start + r, c)] = self.y_scaler.inverse(c, yhat[r * n_out + c].f64());
+                    out[(start + r, c)] = self.y_scaler.invert_value(c, yhat[r * n_out + c].f64());
                 }
             }
         }
@@ -139,7 +156,7 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(32, 2, |r, c| (r * c) as f64);
     /// let y = DMatrix::from_fn(32, 1, |r, _| r as f64);
-    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(3).patience(0).progress(false).fit(&x, &y).unwrap();
+    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(3).patience(0).fit(&x, &y).unwrap();
     /// assert_eq!(m.history().val_loss.len(), 3);
     /// ```
     pub fn history(&self) -> &TrainingHistory {
@@ -152,23 +169,24 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(16, 2, |r, c| (r + 2 * c) as f64);
     /// let y = DMatrix::from_fn(16, 3, |r, c| (r * c) as f64);
-    /// let m = seqnet::LstmParams::new(2, 3).hidden(4).steps(2).epochs(1).progress(false).fit(&x, &y).unwrap();
+    /// let m = seqnet::LstmParams::new(2, 3).hidden(4).steps(2).epochs(1).fit(&x, &y).unwrap();
     /// assert_eq!((m.shape().steps, m.shape().n_outputs), (2, 3));
     /// ```
     pub fn shape(&self) -> &LstmShape {
         &self.shape
     }
 
-    /// The hyper-parameters the model was trained with.
+    /// The (checked) parameters the model was trained with: data shape, hyper-parameters,
+    /// seed.
     ///
     /// ```
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(16, 2, |r, c| (r + 2 * c) as f64);
     /// let y = DMatrix::from_fn(16, 1, |r, _| r as f64);
-    /// let p = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).progress(false);
+    /// let p = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).check().unwrap();
     /// assert_eq!(p.fit(&x, &y).unwrap().params(), &p);
     /// ```
-    pub fn params(&self) -> &LstmParams {
+    pub fn params(&self) -> &CheckedLstmParams {
         &self.params
     }
 
@@ -178,7 +196,7 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(16, 2, |r, c| (r + 2 * c) as f64);
     /// let y = DMatrix::from_fn(16, 1, |r, _| r as f64);
-    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).progress(false)
+    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1)
     ///     .precision(seqnet::Precision::F64).fit(&x, &y).unwrap();
     /// assert_eq!(m.precision(), seqnet::Precision::F64);
     /// ```
@@ -197,7 +215,7 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(16, 2, |r, c| (r + 2 * c) as f64);
     /// let y = DMatrix::from_fn(16, 1, |r, _| r as f64);
-    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).progress(false).fit(&x, &y).unwrap();
+    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).fit(&x, &y).unwrap();
     /// let path = std::env::temp_dir().join("seqnet_doc_save.json");
     /// m.save(&path).unwrap();
     /// assert_eq!(seqnet::LstmRegressor::load(&path).unwrap(), m);
@@ -213,9 +231,10 @@ impl LstmRegressor {
         })
     }
 
-    /// Reads a model written by [`LstmRegressor::save`]; a different `format_version` or an
-    /// internally inconsistent file (weights not matching the stated shape, scalers of the wrong
-    /// length) is a [`SeqError::Format`].
+    /// Reads a model written by [`LstmRegressor::save`] (this version or version 1, see
+    /// [`FORMAT_VERSION`]); another `format_version` or an internally inconsistent file
+    /// (weights not matching the stated shape, scalers of the wrong length) is a
+    /// [`SeqError::Format`], and invalid hyper-parameters a [`SeqError::Json`].
     ///
     /// ```
     /// let path = std::env::temp_dir().join("seqnet_doc_bad_version.json");
@@ -233,10 +252,10 @@ impl LstmRegressor {
         };
         let value: serde_json::Value = serde_json::from_str(&text).map_err(json_err)?;
         let found = value.get("format_version").and_then(|v| v.as_u64());
-        if found != Some(u64::from(FORMAT_VERSION)) {
+        if !found.is_some_and(|v| READABLE_VERSIONS.iter().any(|&r| u64::from(r) == v)) {
             return Err(SeqError::Format {
                 path: path.to_path_buf(),
-                expected: format!("format_version {FORMAT_VERSION}"),
+                expected: format!("format_version {FORMAT_VERSION} (or 1)"),
                 found: found.map_or("no format_version field".into(), |v| {
                     format!("format_version {v}")
                 }),
@@ -254,7 +273,7 @@ impl LstmRegressor {
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(16, 2, |r, c| (r + 2 * c) as f64);
     /// let y = DMatrix::from_fn(16, 1, |r, _| r as f64);
-    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).progress(false).fit(&x, &y).unwrap();
+    /// let m = seqnet::LstmParams::new(2, 1).hidden(4).epochs(1).fit(&x, &y).unwrap();
     /// let path = std::env::temp_dir().join("seqnet_doc_shape.json");
     /// m.save(&path).unwrap();
     /// let other = seqnet::LstmShape::new(2, 1, 8, 1, 1).unwrap();
@@ -285,6 +304,12 @@ impl LstmRegressor {
         {
             return fail("a shape with all sizes >= 1".into(), e.to_string());
         }
+        if self.params.shape() != self.shape {
+            return fail(
+                format!("hyper-parameters describing shape {:?}", self.shape),
+                format!("{:?}", self.params.shape()),
+            );
+        }
         if self.weights.shape() != &self.shape {
             return fail(
                 format!("weights of shape {:?}", self.shape),
@@ -302,10 +327,10 @@ impl LstmRegressor {
             ("y", &self.y_scaler, self.shape.n_outputs),
         ];
         for (name, s, n) in scalers {
-            if s.mean.len() != n || s.std.len() != n {
+            if s.mean.len() != n || s.sd.len() != n {
                 return fail(
                     format!("{name} scaler of length {n}"),
-                    format!("lengths {} / {}", s.mean.len(), s.std.len()),
+                    format!("lengths {} / {}", s.mean.len(), s.sd.len()),
                 );
             }
         }

@@ -25,6 +25,7 @@ use crate::error::SeqError;
 use crate::float::Float;
 use crate::gemm::{gemm, view, view_mut};
 use faer::{Accum, Par};
+use numerics::random::standard_normal;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 use serde::{Deserialize, Serialize};
 
@@ -189,15 +190,24 @@ impl<T: Float> Workspace<T> {
         Self::with_par(Par::Seq)
     }
 
-    /// An empty workspace whose GEMMs use the given faer parallelism (`Par::Seq` or
-    /// `Par::rayon(n)`); at this crate's small shapes sequential GEMMs are usually faster, see
-    /// docs/benchmarks.md.
+    /// An empty workspace whose GEMMs run on `threads` rayon threads (`0` or `1`: sequential,
+    /// like [`Workspace::new`]); at this crate's small shapes sequential GEMMs are usually
+    /// faster, see docs/benchmarks.md. (Mini-batch parallelism is the separate
+    /// [`LstmSettings::threads`](crate::LstmSettings::threads).)
     ///
     /// ```
-    /// let ws = seqnet::Workspace::<f64>::with_par(faer::Par::rayon(2));
+    /// let ws = seqnet::Workspace::<f64>::with_gemm_threads(2);
     /// # let _ = ws;
     /// ```
-    pub fn with_par(par: Par) -> Self {
+    pub fn with_gemm_threads(threads: usize) -> Self {
+        Self::with_par(if threads <= 1 {
+            Par::Seq
+        } else {
+            Par::rayon(threads)
+        })
+    }
+
+    fn with_par(par: Par) -> Self {
         Self {
             batch: 0,
             par,
@@ -471,77 +481,78 @@ impl<T: Float> Network<T> {
     }
 
     fn forward_unchecked(&self, x: &[T], b: usize, ws: &mut Workspace<T>) {
+        ws.prepare(&self.shape, b);
+        self.load_inputs(x, b, ws);
+        for l in 0..self.shape.layers {
+            self.forward_layer(l, b, ws);
+        }
+        self.forward_head(b, ws);
+    }
+
+    /// Layer-0 inputs: sample row `r`, step `t` is `x[r, t*F .. (t+1)*F]`.
+    fn load_inputs(&self, x: &[T], b: usize, ws: &mut Workspace<T>) {
+        let s = self.shape;
+        let f = s.n_features;
+        let row = f + s.hidden;
+        let xh = &mut ws.xh[0];
+        for t in 0..s.steps {
+            for r in 0..b {
+                let dst = (t * b + r) * row;
+                xh[dst..dst + f].copy_from_slice(&x[r * s.n_inputs() + t * f..][..f]);
+            }
+        }
+    }
+
+    /// All steps of layer `l` (Eq. 28): per step, one GEMM for the four gates of the batch,
+    /// then the element-wise cell; the hidden state feeds the next step and the layer above.
+    fn forward_layer(&self, l: usize, b: usize, ws: &mut Workspace<T>) {
         let s = self.shape;
         let (tn, h) = (s.steps, s.hidden);
-        ws.prepare(&s, b);
+        let n_in = s.layer_input(l);
+        let row = n_in + h;
+        let off = s.layer_offset(l);
+        let w = &self.params[off..off + row * 4 * h];
+        let bias = &self.params[off + row * 4 * h..off + s.layer_len(l)];
         let par = ws.par;
-        // Layer-0 inputs: sample row r, step t is x[r, t*F .. (t+1)*F].
-        {
-            let f = s.n_features;
-            let row = f + h;
-            let xh = &mut ws.xh[0];
-            for t in 0..tn {
-                for r in 0..b {
-                    let dst = (t * b + r) * row;
-                    xh[dst..dst + f].copy_from_slice(&x[r * s.n_inputs() + t * f..][..f]);
-                }
-            }
+        // h_{-1} = 0
+        for r in 0..b {
+            ws.xh[l][r * row + n_in..(r + 1) * row].fill(T::of(0.0));
         }
-        for l in 0..s.layers {
-            let n_in = s.layer_input(l);
-            let row = n_in + h;
-            let off = s.layer_offset(l);
-            let w = &self.params[off..off + row * 4 * h];
-            let bias = &self.params[off + row * 4 * h..off + s.layer_len(l)];
-            // h_{-1} = 0
-            for r in 0..b {
-                ws.xh[l][r * row + n_in..(r + 1) * row].fill(T::of(0.0));
-            }
-            for t in 0..tn {
-                let z = &mut ws.gates[l][t * b * 4 * h..(t + 1) * b * 4 * h];
-                let xh_t = &ws.xh[l][t * b * row..(t + 1) * b * row];
-                gemm(
-                    view_mut(z, b, 4 * h),
-                    Accum::Replace,
-                    view(xh_t, b, row),
-                    view(w, row, 4 * h),
-                    par,
-                );
-                let (c_done, c_rest) = ws.cells[l].split_at_mut(t * b * h);
-                let c_prev = if t == 0 {
-                    &ws.c_zero[..]
-                } else {
-                    &c_done[(t - 1) * b * h..]
-                };
-                let tanh_c = &mut ws.tanh_c[l][t * b * h..(t + 1) * b * h];
-                let h_t = &mut ws.hs[l][t * b * h..(t + 1) * b * h];
-                ws.arch.dispatch(CellForward {
-                    z,
-                    bias,
-                    c_prev,
-                    c: &mut c_rest[..b * h],
-                    tanh_c,
-                    h_out: h_t,
-                    h,
-                });
-                let h_t = &ws.hs[l][t * b * h..(t + 1) * b * h];
-                if t + 1 < tn {
-                    let xh_next = &mut ws.xh[l][(t + 1) * b * row..(t + 2) * b * row];
-                    for r in 0..b {
-                        xh_next[r * row + n_in..(r + 1) * row]
-                            .copy_from_slice(&h_t[r * h..(r + 1) * h]);
-                    }
-                }
-                if l + 1 < s.layers {
-                    let up = &mut ws.xh[l + 1][t * b * 2 * h..(t + 1) * b * 2 * h];
-                    for r in 0..b {
-                        up[r * 2 * h..r * 2 * h + h].copy_from_slice(&h_t[r * h..(r + 1) * h]);
-                    }
-                }
-            }
+        for t in 0..tn {
+            let z = &mut ws.gates[l][t * b * 4 * h..(t + 1) * b * 4 * h];
+            let xh_t = &ws.xh[l][t * b * row..(t + 1) * b * row];
+            gemm(
+                view_mut(z, b, 4 * h),
+                Accum::Replace,
+                view(xh_t, b, row),
+                view(w, row, 4 * h),
+                par,
+            );
+            let (c_done, c_rest) = ws.cells[l].split_at_mut(t * b * h);
+            let c_prev = if t == 0 {
+                &ws.c_zero[..]
+            } else {
+                &c_done[(t - 1) * b * h..]
+            };
+            let tanh_c = &mut ws.tanh_c[l][t * b * h..(t + 1) * b * h];
+            let h_t = &mut ws.hs[l][t * b * h..(t + 1) * b * h];
+            ws.arch.dispatch(CellForward {
+                z,
+                bias,
+                c_prev,
+                c: &mut c_rest[..b * h],
+                tanh_c,
+                h_out: h_t,
+                h,
+            });
+            pass_hidden(ws, &s, l, t, b);
         }
-        // Dense head on the top layer's last hidden state.
-        let o = s.n_outputs;
+    }
+
+    /// Dense head on the top layer's last hidden state.
+    fn forward_head(&self, b: usize, ws: &mut Workspace<T>) {
+        let s = self.shape;
+        let (tn, h, o) = (s.steps, s.hidden, s.n_outputs);
         let off = s.head_offset();
         let (wy, by) = (&self.params[off..off + h * o], &self.params[off + h * o..]);
         let h_last = &ws.hs[s.layers - 1][(tn - 1) * b * h..tn * b * h];
@@ -554,7 +565,7 @@ impl<T: Float> Network<T> {
             Accum::Add,
             view(h_last, b, h),
             view(wy, h, o),
-            par,
+            ws.par,
         );
     }
 
@@ -566,11 +577,28 @@ impl<T: Float> Network<T> {
         grad: &mut [T],
         ws: &mut Workspace<T>,
     ) -> f64 {
+        let sse = self.head_backward(y, b, scale, grad, ws);
+        for l in (0..self.shape.layers).rev() {
+            self.layer_backward(l, b, grad, ws);
+            std::mem::swap(&mut ws.dh_above, &mut ws.dh_below);
+        }
+        sse
+    }
+
+    /// Output error `d(scale * sse)/d(yhat) = 2 scale (yhat - y)` into `ws.dout`, the head's
+    /// weight and bias gradients, and `dL/dh` of the top layer's last step into `ws.dh_above`
+    /// (zero at the other steps). Returns the sum of squared errors.
+    fn head_backward(
+        &self,
+        y: &[T],
+        b: usize,
+        scale: f64,
+        grad: &mut [T],
+        ws: &mut Workspace<T>,
+    ) -> f64 {
         let s = self.shape;
         let (tn, h, o) = (s.steps, s.hidden, s.n_outputs);
         let par = ws.par;
-        let zero = T::of(0.0);
-        // d(scale * sse)/d(yhat) = 2 scale (yhat - y)
         let mut sse = 0.0;
         let two_scale = T::of(2.0 * scale);
         for ((d, &yh), &yt) in ws.dout[..b * o].iter_mut().zip(&ws.out[..b * o]).zip(y) {
@@ -592,7 +620,7 @@ impl<T: Float> Network<T> {
             );
             column_sums(&ws.dout[..b * o], o, gb);
         }
-        ws.dh_above[..tn * b * h].fill(zero);
+        ws.dh_above[..tn * b * h].fill(T::of(0.0));
         gemm(
             view_mut(&mut ws.dh_above[(tn - 1) * b * h..], b, h),
             Accum::Replace,
@@ -600,68 +628,107 @@ impl<T: Float> Network<T> {
             view(wy, h, o).transpose(),
             par,
         );
-        for l in (0..s.layers).rev() {
-            let n_in = s.layer_input(l);
-            let row = n_in + h;
-            let off = s.layer_offset(l);
-            let w = view(&self.params[off..off + row * 4 * h], row, 4 * h);
-            ws.dc[..b * h].fill(zero);
-            ws.dh_rec[..b * h].fill(zero);
-            for t in (0..tn).rev() {
-                let span = t * b * h..(t + 1) * b * h;
-                let c_prev = if t == 0 {
-                    &ws.c_zero[..]
-                } else {
-                    &ws.cells[l][(t - 1) * b * h..t * b * h]
-                };
-                let dz_t = &mut ws.dz[t * b * 4 * h..(t + 1) * b * 4 * h];
-                let gates = &ws.gates[l][t * b * 4 * h..(t + 1) * b * 4 * h];
-                let (tanh_c, above) = (&ws.tanh_c[l][span.clone()], &ws.dh_above[span.clone()]);
-                let (rec, dc) = (&ws.dh_rec[..b * h], &mut ws.dc[..b * h]);
-                ws.arch.dispatch(CellBackward {
-                    gates,
-                    c_prev,
-                    tanh_c,
-                    dh_above: above,
-                    dh_rec: rec,
-                    dc,
-                    dz: dz_t,
-                    h,
-                });
-                let dz_t = view(dz_t, b, 4 * h);
-                if t > 0 {
-                    let w_h = w.subrows(n_in, h).transpose();
-                    gemm(
-                        view_mut(&mut ws.dh_rec, b, h),
-                        Accum::Replace,
-                        dz_t,
-                        w_h,
-                        par,
-                    );
-                }
-                if l > 0 {
-                    let w_x = w.subrows(0, n_in).transpose();
-                    gemm(
-                        view_mut(&mut ws.dh_below[span], b, h),
-                        Accum::Replace,
-                        dz_t,
-                        w_x,
-                        par,
-                    );
-                }
-            }
-            let (gw, gb) = grad[off..off + s.layer_len(l)].split_at_mut(row * 4 * h);
+        sse
+    }
+
+    /// Backpropagation through all steps of layer `l` (last step first) with `dL/dh` from
+    /// above in `ws.dh_above`; writes the layer's weight and bias gradients and, below the
+    /// first layer, `dL/dh` of the layer beneath into `ws.dh_below`.
+    fn layer_backward(&self, l: usize, b: usize, grad: &mut [T], ws: &mut Workspace<T>) {
+        let s = self.shape;
+        let (tn, h) = (s.steps, s.hidden);
+        let row = s.layer_input(l) + h;
+        let off = s.layer_offset(l);
+        let zero = T::of(0.0);
+        ws.dc[..b * h].fill(zero);
+        ws.dh_rec[..b * h].fill(zero);
+        for t in (0..tn).rev() {
+            self.step_backward(l, t, b, ws);
+        }
+        let (gw, gb) = grad[off..off + s.layer_len(l)].split_at_mut(row * 4 * h);
+        gemm(
+            view_mut(gw, row, 4 * h),
+            Accum::Replace,
+            view(&ws.xh[l], tn * b, row).transpose(),
+            view(&ws.dz, tn * b, 4 * h),
+            ws.par,
+        );
+        column_sums(&ws.dz[..tn * b * 4 * h], 4 * h, gb);
+    }
+
+    /// One step `t` of layer `l` backwards: the gate gradients `dZ_t` (into `ws.dz`), the
+    /// cell-state gradient carried to step `t - 1` (`ws.dc`), the recurrent `dh_{t-1} = dZ_t
+    /// W_h^T` (`ws.dh_rec`) and, below the first layer, `dx_t = dZ_t W_x^T` (`ws.dh_below`).
+    fn step_backward(&self, l: usize, t: usize, b: usize, ws: &mut Workspace<T>) {
+        let s = self.shape;
+        let h = s.hidden;
+        let n_in = s.layer_input(l);
+        let row = n_in + h;
+        let off = s.layer_offset(l);
+        let w = view(&self.params[off..off + row * 4 * h], row, 4 * h);
+        let par = ws.par;
+        let span = t * b * h..(t + 1) * b * h;
+        let c_prev = if t == 0 {
+            &ws.c_zero[..]
+        } else {
+            &ws.cells[l][(t - 1) * b * h..t * b * h]
+        };
+        let dz_t = &mut ws.dz[t * b * 4 * h..(t + 1) * b * 4 * h];
+        let gates = &ws.gates[l][t * b * 4 * h..(t + 1) * b * 4 * h];
+        let (tanh_c, above) = (&ws.tanh_c[l][span.clone()], &ws.dh_above[span.clone()]);
+        let (rec, dc) = (&ws.dh_rec[..b * h], &mut ws.dc[..b * h]);
+        ws.arch.dispatch(CellBackward {
+            gates,
+            c_prev,
+            tanh_c,
+            dh_above: above,
+            dh_rec: rec,
+            dc,
+            dz: dz_t,
+            h,
+        });
+        let dz_t = view(dz_t, b, 4 * h);
+        if t > 0 {
+            let w_h = w.subrows(n_in, h).transpose();
             gemm(
-                view_mut(gw, row, 4 * h),
+                view_mut(&mut ws.dh_rec, b, h),
                 Accum::Replace,
-                view(&ws.xh[l], tn * b, row).transpose(),
-                view(&ws.dz, tn * b, 4 * h),
+                dz_t,
+                w_h,
                 par,
             );
-            column_sums(&ws.dz[..tn * b * 4 * h], 4 * h, gb);
-            std::mem::swap(&mut ws.dh_above, &mut ws.dh_below);
         }
-        sse
+        if l > 0 {
+            let w_x = w.subrows(0, n_in).transpose();
+            gemm(
+                view_mut(&mut ws.dh_below[span], b, h),
+                Accum::Replace,
+                dz_t,
+                w_x,
+                par,
+            );
+        }
+    }
+}
+
+/// Copies step `t`'s hidden state of layer `l` into the recurrent part of step `t + 1`'s input
+/// rows and into the input part of layer `l + 1`'s step-`t` rows.
+fn pass_hidden<T: Float>(ws: &mut Workspace<T>, s: &LstmShape, l: usize, t: usize, b: usize) {
+    let (tn, h) = (s.steps, s.hidden);
+    let n_in = s.layer_input(l);
+    let row = n_in + h;
+    let h_t = &ws.hs[l][t * b * h..(t + 1) * b * h];
+    if t + 1 < tn {
+        let xh_next = &mut ws.xh[l][(t + 1) * b * row..(t + 2) * b * row];
+        for r in 0..b {
+            xh_next[r * row + n_in..(r + 1) * row].copy_from_slice(&h_t[r * h..(r + 1) * h]);
+        }
+    }
+    if l + 1 < s.layers {
+        let up = &mut ws.xh[l + 1][t * b * 2 * h..(t + 1) * b * 2 * h];
+        for r in 0..b {
+            up[r * 2 * h..r * 2 * h + h].copy_from_slice(&h_t[r * h..(r + 1) * h]);
+        }
     }
 }
 
@@ -709,16 +776,7 @@ impl<T: Float> pulp::WithSimd for CellBackward<'_, T> {
     type Output = ();
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        cell_backward(
-            self.gates,
-            self.c_prev,
-            self.tanh_c,
-            self.dh_above,
-            self.dh_rec,
-            self.dc,
-            self.dz,
-            self.h,
-        );
+        cell_backward(self);
     }
 }
 
@@ -782,16 +840,17 @@ fn tanh_slice<T: Float>(xs: &mut [T]) {
 /// left for the caller to overwrite; `dc` carries dL/dC_t in and dL/dC_{t-1} out. Writes
 /// dL/dZ_t (pre-activation gate gradients) into `dz`.
 #[inline(always)]
-fn cell_backward<T: Float>(
-    gates: &[T],
-    c_prev: &[T],
-    tanh_c: &[T],
-    dh_above: &[T],
-    dh_rec: &[T],
-    dc: &mut [T],
-    dz: &mut [T],
-    h: usize,
-) {
+fn cell_backward<T: Float>(args: CellBackward<'_, T>) {
+    let CellBackward {
+        gates,
+        c_prev,
+        tanh_c,
+        dh_above,
+        dh_rec,
+        dc,
+        dz,
+        h,
+    } = args;
     let one = T::of(1.0);
     for (r, (gr, dzr)) in gates
         .chunks_exact(4 * h)
@@ -839,7 +898,7 @@ fn column_sums<T: Float>(m: &[T], cols: usize, out: &mut [T]) {
 /// A random `n x n` orthogonal matrix (row-major): modified Gram-Schmidt on a Gaussian matrix,
 /// rows sign-normalised as in QR with a positive diagonal of R.
 fn orthogonal(n: usize, rng: &mut StdRng) -> Vec<f64> {
-    let mut q: Vec<f64> = (0..n * n).map(|_| gaussian(rng)).collect();
+    let mut q: Vec<f64> = (0..n * n).map(|_| standard_normal(rng)).collect();
     for i in 0..n {
         for k in 0..i {
             let d: f64 = (0..n).map(|c| q[i * n + c] * q[k * n + c]).sum();
@@ -855,11 +914,4 @@ fn orthogonal(n: usize, rng: &mut StdRng) -> Vec<f64> {
         }
     }
     q
-}
-
-/// Standard normal draw (Box-Muller).
-fn gaussian(rng: &mut StdRng) -> f64 {
-    let u1: f64 = 1.0 - rng.random::<f64>(); // (0, 1]
-    let u2: f64 = rng.random::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }

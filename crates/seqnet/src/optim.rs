@@ -4,7 +4,8 @@ use crate::float::Float;
 use serde::{Deserialize, Serialize};
 
 /// Parameter-update rule. The learning rate is set separately
-/// ([`crate::LstmParams::learning_rate`]) so schedules apply to both rules.
+/// ([`LstmSettings::learning_rate`](crate::LstmSettings::learning_rate)) so schedules apply to
+/// both rules.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Optimizer {
     /// Adam (Kingma & Ba 2015) with bias correction, as `torch.optim.Adam`.

@@ -1,137 +1,129 @@
-//! Validated hyper-parameters (linfa style) and `fit`.
+//! The linfa-style parameter pipeline: [`LstmParams`] (a builder, unchecked) →
+//! [`LstmParams::check`] → [`CheckedLstmParams`] (validated, immutable) → `fit` (in the
+//! training module).
 
 use crate::error::SeqError;
 use crate::float::Precision;
-use crate::model::LstmRegressor;
 use crate::net::LstmShape;
 use crate::optim::{LrSchedule, Optimizer};
-use nalgebra::DMatrix;
+use crate::settings::LstmSettings;
 use serde::{Deserialize, Serialize};
 
-/// Hyper-parameters of an LSTM regressor; chain the setters, then call [`LstmParams::fit`].
+/// Parameters of one LSTM fit: the data shape, the hyper-parameters ([`LstmSettings`]) and the
+/// seed. Chain the setters, then [`check`](Self::check) them (or call
+/// [`fit`](Self::fit), which checks first).
 ///
-/// Defaults: 1 layer of 64 hidden units, `steps = 1` (all inputs in one step), 20 epochs,
-/// batch 256, Adam with learning rate 1e-3 and a constant schedule, 10 % validation split,
-/// early-stopping patience 10, no clipping, f32 kernels, seed 0, 1 thread, progress bar on.
+/// Defaults: [`LstmSettings::default`] and seed 0.
 ///
 /// ```
 /// use seqnet::{LstmParams, Optimizer, Precision};
 /// let p = LstmParams::new(10, 12).hidden(32).layers(2).steps(10).epochs(5)
-///     .optimizer(Optimizer::adam()).precision(Precision::F64).seed(3);
-/// assert_eq!(p.shape().unwrap().n_features, 1);
+///     .optimizer(Optimizer::adam()).precision(Precision::F64).seed(3)
+///     .check()
+///     .unwrap();
+/// assert_eq!(p.shape().n_features, 1);
 /// ```
+///
+/// Serialised flat: `n_inputs`, `n_outputs`, every [`LstmSettings`] field, `seed`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LstmParams {
     n_inputs: usize,
     n_outputs: usize,
-    hidden: usize,
-    layers: usize,
-    steps: usize,
-    epochs: usize,
-    batch_size: usize,
-    learning_rate: f64,
-    optimizer: Optimizer,
-    schedule: LrSchedule,
-    validation_fraction: f64,
-    patience: usize,
-    clip_norm: Option<f64>,
-    precision: Precision,
+    #[serde(flatten)]
+    settings: LstmSettings,
     seed: u64,
-    threads: usize,
-    progress: bool,
 }
 
 impl LstmParams {
     /// Defaults (see the type docs) for `n_inputs` features in and `n_outputs` targets out.
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(10, 12);
-    /// assert_eq!(p.get_batch_size(), 256);
+    /// let p = seqnet::LstmParams::new(10, 12).check().unwrap();
+    /// assert_eq!(p.settings(), &seqnet::LstmSettings::default());
     /// ```
     pub fn new(n_inputs: usize, n_outputs: usize) -> Self {
         Self {
             n_inputs,
             n_outputs,
-            hidden: 64,
-            layers: 1,
-            steps: 1,
-            epochs: 20,
-            batch_size: 256,
-            learning_rate: 1e-3,
-            optimizer: Optimizer::adam(),
-            schedule: LrSchedule::Constant,
-            validation_fraction: 0.1,
-            patience: 10,
-            clip_norm: None,
-            precision: Precision::F32,
+            settings: LstmSettings::default(),
             seed: 0,
-            threads: 1,
-            progress: true,
         }
+    }
+
+    /// Replaces every hyper-parameter at once (e.g. settings read from a configuration file);
+    /// the data shape and the seed are kept.
+    ///
+    /// ```
+    /// let s = seqnet::LstmSettings { hidden: 8, steps: 2, ..Default::default() };
+    /// let p = seqnet::LstmParams::new(4, 1).seed(5).settings(s.clone()).check().unwrap();
+    /// assert_eq!((p.settings(), p.seed()), (&s, 5));
+    /// ```
+    pub fn settings(mut self, settings: LstmSettings) -> Self {
+        self.settings = settings;
+        self
     }
 
     /// Hidden units per layer.
     ///
     /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).hidden(8).shape().unwrap().hidden, 8);
+    /// assert_eq!(seqnet::LstmParams::new(2, 1).hidden(8).check().unwrap().shape().hidden, 8);
     /// ```
     pub fn hidden(mut self, h: usize) -> Self {
-        self.hidden = h;
+        self.settings.hidden = h;
         self
     }
 
     /// Number of stacked LSTM layers.
     ///
     /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).layers(3).shape().unwrap().layers, 3);
+    /// assert_eq!(seqnet::LstmParams::new(2, 1).layers(3).check().unwrap().shape().layers, 3);
     /// ```
     pub fn layers(mut self, l: usize) -> Self {
-        self.layers = l;
+        self.settings.layers = l;
         self
     }
 
     /// Sequence length: each sample's inputs are fed as `s` steps of `n_inputs / s` consecutive
     /// values (`s = n_inputs`: a sequence of scalars; `s = 1`: one step of all features).
-    /// `n_inputs % s == 0` is checked by `fit`.
+    /// `n_inputs % s == 0` is checked by [`check`](Self::check).
     ///
     /// ```
-    /// assert_eq!(seqnet::LstmParams::new(10, 1).steps(5).shape().unwrap().n_features, 2);
-    /// assert!(seqnet::LstmParams::new(10, 1).steps(3).shape().is_err());
+    /// assert_eq!(seqnet::LstmParams::new(10, 1).steps(5).check().unwrap().shape().n_features, 2);
+    /// assert!(seqnet::LstmParams::new(10, 1).steps(3).check().is_err());
     /// ```
     pub fn steps(mut self, s: usize) -> Self {
-        self.steps = s;
+        self.settings.steps = s;
         self
     }
 
     /// Maximum number of passes over the training split.
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).epochs(3);
-    /// # let _ = p;
+    /// assert_eq!(seqnet::LstmParams::new(2, 1).epochs(3).check().unwrap().settings().epochs, 3);
     /// ```
     pub fn epochs(mut self, e: usize) -> Self {
-        self.epochs = e;
+        self.settings.epochs = e;
         self
     }
 
     /// Mini-batch size (the last batch of an epoch may be smaller).
     ///
     /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).batch_size(32).get_batch_size(), 32);
+    /// let p = seqnet::LstmParams::new(2, 1).batch_size(32).check().unwrap();
+    /// assert_eq!(p.settings().batch_size, 32);
     /// ```
     pub fn batch_size(mut self, b: usize) -> Self {
-        self.batch_size = b;
+        self.settings.batch_size = b;
         self
     }
 
     /// Base learning rate (before the schedule).
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).learning_rate(3e-3);
-    /// # let _ = p;
+    /// assert!(seqnet::LstmParams::new(2, 1).learning_rate(-1.0).check().is_err());
     /// ```
     pub fn learning_rate(mut self, lr: f64) -> Self {
-        self.learning_rate = lr;
+        self.settings.learning_rate = lr;
         self
     }
 
@@ -142,7 +134,7 @@ impl LstmParams {
     /// # let _ = p;
     /// ```
     pub fn optimizer(mut self, o: Optimizer) -> Self {
-        self.optimizer = o;
+        self.settings.optimizer = o;
         self
     }
 
@@ -153,7 +145,7 @@ impl LstmParams {
     /// # let _ = p;
     /// ```
     pub fn schedule(mut self, s: LrSchedule) -> Self {
-        self.schedule = s;
+        self.settings.schedule = s;
         self
     }
 
@@ -161,11 +153,10 @@ impl LstmParams {
     /// plateau schedule; in `[0, 1)`. With 0 the training loss is monitored instead.
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).validation_fraction(0.2);
-    /// # let _ = p;
+    /// assert!(seqnet::LstmParams::new(2, 1).validation_fraction(1.0).check().is_err());
     /// ```
     pub fn validation_fraction(mut self, f: f64) -> Self {
-        self.validation_fraction = f;
+        self.settings.validation_fraction = f;
         self
     }
 
@@ -177,18 +168,18 @@ impl LstmParams {
     /// # let _ = p;
     /// ```
     pub fn patience(mut self, p: usize) -> Self {
-        self.patience = p;
+        self.settings.patience = p;
         self
     }
 
     /// Rescale each mini-batch gradient to Euclidean norm at most `c` (global-norm clipping).
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).clip_norm(1.0);
-    /// # let _ = p;
+    /// let p = seqnet::LstmParams::new(2, 1).clip_norm(1.0).check().unwrap();
+    /// assert_eq!(p.settings().clip_norm, Some(1.0));
     /// ```
     pub fn clip_norm(mut self, c: f64) -> Self {
-        self.clip_norm = Some(c);
+        self.settings.clip_norm = Some(c);
         self
     }
 
@@ -199,15 +190,14 @@ impl LstmParams {
     /// # let _ = p;
     /// ```
     pub fn precision(mut self, p: Precision) -> Self {
-        self.precision = p;
+        self.settings.precision = p;
         self
     }
 
     /// Seed of the initial weights, the validation split and the per-epoch shuffles.
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).seed(42);
-    /// # let _ = p;
+    /// assert_eq!(seqnet::LstmParams::new(2, 1).seed(42).check().unwrap().seed(), 42);
     /// ```
     pub fn seed(mut self, s: u64) -> Self {
         self.seed = s;
@@ -219,218 +209,152 @@ impl LstmParams {
     /// the thread count but not on scheduling.
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).threads(2);
-    /// # let _ = p;
+    /// assert!(seqnet::LstmParams::new(2, 1).threads(0).check().is_err());
     /// ```
     pub fn threads(mut self, t: usize) -> Self {
-        self.threads = t;
+        self.settings.threads = t;
         self
     }
 
-    /// Show an indicatif progress bar with the per-epoch losses. It is drawn only when stderr is
-    /// a terminal and the `CI` environment variable is not `true`.
+    /// Validates every hyper-parameter against the data shape, once; the result cannot be
+    /// changed afterwards. Errors name the offending parameter
+    /// ([`SeqError::InvalidParameter`]).
     ///
     /// ```
-    /// let p = seqnet::LstmParams::new(2, 1).progress(false);
-    /// # let _ = p;
+    /// let err = seqnet::LstmParams::new(2, 1).batch_size(0).check().unwrap_err();
+    /// assert!(matches!(err, seqnet::SeqError::InvalidParameter { name: "batch_size", .. }));
     /// ```
-    pub fn progress(mut self, show: bool) -> Self {
-        self.progress = show;
-        self
-    }
-
-    /// The mini-batch size.
-    ///
-    /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).get_batch_size(), 256);
-    /// ```
-    pub fn get_batch_size(&self) -> usize {
-        self.batch_size
-    }
-
-    /// The hidden size and layer count, `(hidden, layers)`.
-    ///
-    /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).get_architecture(), (64, 1));
-    /// ```
-    pub fn get_architecture(&self) -> (usize, usize) {
-        (self.hidden, self.layers)
-    }
-
-    /// The maximum number of epochs.
-    ///
-    /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).get_epochs(), 20);
-    /// ```
-    pub fn get_epochs(&self) -> usize {
-        self.epochs
-    }
-
-    /// The seed.
-    ///
-    /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).seed(9).get_seed(), 9);
-    /// ```
-    pub fn get_seed(&self) -> u64 {
-        self.seed
-    }
-
-    /// The network shape these parameters describe (validates sizes and `n_inputs % steps`).
-    ///
-    /// ```
-    /// let s = seqnet::LstmParams::new(10, 12).steps(10).shape().unwrap();
-    /// assert_eq!((s.steps, s.n_features, s.n_outputs), (10, 1, 12));
-    /// ```
-    pub fn shape(&self) -> Result<LstmShape, SeqError> {
-        if self.steps == 0 || !self.n_inputs.is_multiple_of(self.steps) {
-            return Err(SeqError::InvalidParameter {
-                name: "steps",
-                reason: format!(
-                    "must be a positive divisor of n_inputs = {}, got {}",
-                    self.n_inputs, self.steps
-                ),
-            });
-        }
-        if self.n_inputs == 0 {
-            return Err(SeqError::InvalidParameter {
-                name: "n_inputs",
-                reason: "must be at least 1".into(),
-            });
-        }
-        LstmShape::new(
-            self.n_inputs / self.steps,
-            self.steps,
-            self.hidden,
-            self.layers,
-            self.n_outputs,
-        )
-    }
-
-    /// Checks every hyper-parameter; `fit` calls this first.
-    ///
-    /// ```
-    /// assert!(seqnet::LstmParams::new(2, 1).learning_rate(-1.0).validate().is_err());
-    /// assert!(seqnet::LstmParams::new(2, 1).validate().is_ok());
-    /// ```
-    pub fn validate(&self) -> Result<LstmShape, SeqError> {
-        let shape = self.shape()?;
-        let bad = |name: &'static str, reason: &str| {
-            Err(SeqError::InvalidParameter {
-                name,
-                reason: reason.into(),
-            })
-        };
-        if self.epochs == 0 {
-            return bad("epochs", "must be at least 1");
-        }
-        if self.batch_size == 0 {
-            return bad("batch_size", "must be at least 1");
-        }
-        if !(self.learning_rate > 0.0 && self.learning_rate.is_finite()) {
-            return bad("learning_rate", "must be positive and finite");
-        }
-        if !(0.0..1.0).contains(&self.validation_fraction) {
-            return bad("validation_fraction", "must be in [0, 1)");
-        }
-        if let Some(c) = self.clip_norm
-            && !(c > 0.0 && c.is_finite())
-        {
-            return bad("clip_norm", "must be positive and finite");
-        }
-        if self.threads == 0 {
-            return bad("threads", "must be at least 1");
-        }
-        if let Err(reason) = self.optimizer.validate() {
-            return bad("optimizer", &reason);
-        }
-        if let Err(reason) = self.schedule.validate() {
-            return bad("schedule", &reason);
-        }
-        Ok(shape)
-    }
-
-    /// Trains a regressor on `x` (rows = samples, `n_inputs` columns) and `y` (`n_outputs`
-    /// columns). Inputs and outputs are standardised with statistics of the whole `x`, `y` (stored
-    /// with the model); the validation split is drawn with the seed.
-    ///
-    /// ```
-    /// use nalgebra::DMatrix;
-    /// let x = DMatrix::from_fn(64, 2, |r, c| ((r * 7 + c * 3) % 11) as f64 / 11.0);
-    /// let y = DMatrix::from_fn(64, 1, |r, _| x[(r, 0)] - x[(r, 1)]);
-    /// let model = seqnet::LstmParams::new(2, 1).hidden(4).epochs(2).batch_size(16)
-    ///     .progress(false).fit(&x, &y).unwrap();
-    /// assert_eq!(model.history().train_loss.len(), 2);
-    /// ```
-    pub fn fit(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<LstmRegressor, SeqError> {
-        let shape = self.validate()?;
-        check_matrix("x", x, None, self.n_inputs)?;
-        check_matrix("y", y, Some(x.nrows()), self.n_outputs)?;
-        crate::train::fit(self, shape, x, y)
-    }
-
-    pub(crate) fn get_learning_rate(&self) -> f64 {
-        self.learning_rate
-    }
-    pub(crate) fn get_optimizer(&self) -> Optimizer {
-        self.optimizer
-    }
-    pub(crate) fn get_schedule(&self) -> LrSchedule {
-        self.schedule
-    }
-    pub(crate) fn get_validation_fraction(&self) -> f64 {
-        self.validation_fraction
-    }
-    pub(crate) fn get_patience(&self) -> usize {
-        self.patience
-    }
-    pub(crate) fn get_clip_norm(&self) -> Option<f64> {
-        self.clip_norm
-    }
-    /// The kernel precision.
-    ///
-    /// ```
-    /// assert_eq!(seqnet::LstmParams::new(2, 1).get_precision(), seqnet::Precision::F32);
-    /// ```
-    pub fn get_precision(&self) -> Precision {
-        self.precision
-    }
-    pub(crate) fn get_threads(&self) -> usize {
-        self.threads
-    }
-    pub(crate) fn get_progress(&self) -> bool {
-        self.progress
+    pub fn check(self) -> Result<CheckedLstmParams, SeqError> {
+        let shape = validate(self.n_inputs, self.n_outputs, &self.settings)?;
+        Ok(CheckedLstmParams {
+            params: self,
+            shape,
+        })
     }
 }
 
-/// Checks a data matrix's shape and finiteness; errors name the argument, row and column.
-pub(crate) fn check_matrix(
-    what: &'static str,
-    m: &DMatrix<f64>,
-    rows: Option<usize>,
-    cols: usize,
-) -> Result<(), SeqError> {
-    if m.ncols() != cols || rows.is_some_and(|r| r != m.nrows()) || m.nrows() == 0 {
-        return Err(SeqError::Shape {
-            what,
-            expected: format!(
-                "{} x {cols}",
-                rows.map_or("n >= 1".to_string(), |r| r.to_string())
-            ),
-            found: format!("{} x {}", m.nrows(), m.ncols()),
+/// Validated [`LstmParams`] (from [`LstmParams::check`]): read-only, ready to
+/// [`fit`](Self::fit). Deserialising validates again, so a loaded value is as trustworthy as a
+/// checked one.
+///
+/// ```
+/// let p = seqnet::LstmParams::new(6, 2).steps(3).hidden(8).seed(1).check().unwrap();
+/// assert_eq!((p.n_inputs(), p.n_outputs(), p.seed()), (6, 2, 1));
+/// assert_eq!((p.shape().steps, p.shape().n_features), (3, 2));
+/// // back to a builder to change something (checked again before use)
+/// let more: seqnet::LstmParams = p.into();
+/// assert!(more.hidden(16).check().is_ok());
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "LstmParams", into = "LstmParams")]
+pub struct CheckedLstmParams {
+    params: LstmParams,
+    shape: LstmShape,
+}
+
+impl CheckedLstmParams {
+    /// Number of input columns.
+    pub fn n_inputs(&self) -> usize {
+        self.params.n_inputs
+    }
+
+    /// Number of output columns.
+    pub fn n_outputs(&self) -> usize {
+        self.params.n_outputs
+    }
+
+    /// The hyper-parameters.
+    pub fn settings(&self) -> &LstmSettings {
+        &self.params.settings
+    }
+
+    /// The seed of the initial weights, the validation split and the shuffles.
+    pub fn seed(&self) -> u64 {
+        self.params.seed
+    }
+
+    /// The network shape (`n_features = n_inputs / steps`).
+    pub fn shape(&self) -> LstmShape {
+        self.shape
+    }
+}
+
+impl From<CheckedLstmParams> for LstmParams {
+    fn from(c: CheckedLstmParams) -> Self {
+        c.params
+    }
+}
+
+impl TryFrom<LstmParams> for CheckedLstmParams {
+    type Error = SeqError;
+    fn try_from(p: LstmParams) -> Result<Self, SeqError> {
+        p.check()
+    }
+}
+
+/// The network shape `settings` describe for `n_inputs` → `n_outputs` (sizes positive,
+/// `n_inputs % steps == 0`).
+fn shape_of(
+    n_inputs: usize,
+    n_outputs: usize,
+    settings: &LstmSettings,
+) -> Result<LstmShape, SeqError> {
+    let steps = settings.steps;
+    if steps == 0 || !n_inputs.is_multiple_of(steps) {
+        return Err(SeqError::InvalidParameter {
+            name: "steps",
+            reason: format!("must be a positive divisor of n_inputs = {n_inputs}, got {steps}"),
         });
     }
-    for c in 0..m.ncols() {
-        for r in 0..m.nrows() {
-            let v = m[(r, c)];
-            if !v.is_finite() {
-                return Err(SeqError::NonFinite {
-                    what,
-                    row: r,
-                    col: c,
-                    value: v,
-                });
-            }
-        }
+    if n_inputs == 0 {
+        return Err(SeqError::InvalidParameter {
+            name: "n_inputs",
+            reason: "must be at least 1".into(),
+        });
     }
-    Ok(())
+    LstmShape::new(
+        n_inputs / steps,
+        steps,
+        settings.hidden,
+        settings.layers,
+        n_outputs,
+    )
+}
+
+/// Checks every hyper-parameter (shape first); returns the network shape.
+fn validate(n_inputs: usize, n_outputs: usize, s: &LstmSettings) -> Result<LstmShape, SeqError> {
+    let shape = shape_of(n_inputs, n_outputs, s)?;
+    let bad = |name: &'static str, reason: &str| {
+        Err(SeqError::InvalidParameter {
+            name,
+            reason: reason.into(),
+        })
+    };
+    if s.epochs == 0 {
+        return bad("epochs", "must be at least 1");
+    }
+    if s.batch_size == 0 {
+        return bad("batch_size", "must be at least 1");
+    }
+    if !(s.learning_rate > 0.0 && s.learning_rate.is_finite()) {
+        return bad("learning_rate", "must be positive and finite");
+    }
+    if !(0.0..1.0).contains(&s.validation_fraction) {
+        return bad("validation_fraction", "must be in [0, 1)");
+    }
+    if let Some(c) = s.clip_norm
+        && !(c > 0.0 && c.is_finite())
+    {
+        return bad("clip_norm", "must be positive and finite");
+    }
+    if s.threads == 0 {
+        return bad("threads", "must be at least 1");
+    }
+    if let Err(reason) = s.optimizer.validate() {
+        return bad("optimizer", &reason);
+    }
+    if let Err(reason) = s.schedule.validate() {
+        return bad("schedule", &reason);
+    }
+    Ok(shape)
 }

@@ -1,8 +1,8 @@
 //! Hyper-parameter choice by a train/test split, as Sec. 3.3.2 chooses layers and hidden units.
 
+use crate::data::{check_matrix, select_rows, split_indices};
 use crate::error::SeqError;
-use crate::params::{LstmParams, check_matrix};
-use crate::train::{select_rows, split_indices};
+use crate::params::{CheckedLstmParams, LstmParams};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -54,7 +54,7 @@ pub struct CandidateScore {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SearchResult {
     /// Base parameters with the winning hidden size and depth (epochs as in the base).
-    pub best: LstmParams,
+    pub best: CheckedLstmParams,
     /// Every candidate tried, in grid order.
     pub table: Vec<CandidateScore>,
 }
@@ -69,7 +69,7 @@ pub struct SearchResult {
 /// let y = DMatrix::from_fn(80, 1, |r, _| x[(r, 0)] * 0.5 - x[(r, 1)]);
 /// let space = seqnet::SearchSpace { hidden: vec![2, 4], layers: vec![1], max_candidates: 2,
 ///     max_epochs: 2, test_fraction: 0.25 };
-/// let base = seqnet::LstmParams::new(2, 1).batch_size(16).progress(false);
+/// let base = seqnet::LstmParams::new(2, 1).batch_size(16);
 /// let res = seqnet::select_hyperparameters(&base, &space, &x, &y).unwrap();
 /// assert_eq!(res.table.len(), 2);
 /// ```
@@ -79,6 +79,45 @@ pub fn select_hyperparameters(
     x: &DMatrix<f64>,
     y: &DMatrix<f64>,
 ) -> Result<SearchResult, SeqError> {
+    validate_space(space)?;
+    let seed = base.clone().check()?.seed();
+    check_matrix("x", x, None, x.ncols())?;
+    check_matrix("y", y, Some(x.nrows()), y.ncols())?;
+    // A different stream from fit's validation split (seed + 1), so the test rows are not reused.
+    let (tr, te) = split_indices(x.nrows(), space.test_fraction, seed.wrapping_add(1))?;
+    let (x_tr, y_tr) = (select_rows(x, &tr), select_rows(y, &tr));
+    let (x_te, y_te) = (select_rows(x, &te), select_rows(y, &te));
+    let mut table = Vec::new();
+    let mut best: Option<(f64, LstmParams)> = None;
+    let grid = space
+        .layers
+        .iter()
+        .flat_map(|&l| space.hidden.iter().map(move |&h| (h, l)));
+    for (hidden, layers) in grid.take(space.max_candidates) {
+        let cand = base.clone().hidden(hidden).layers(layers);
+        let model = cand.clone().epochs(space.max_epochs).fit(&x_tr, &y_tr)?;
+        let score = relative_test_mse(&model.predict(&x_te)?, &y_te);
+        let h = model.history();
+        table.push(CandidateScore {
+            hidden,
+            layers,
+            test_score: score,
+            epochs_run: h.train_loss.len(),
+            seconds: h.wall_seconds,
+        });
+        if best.as_ref().is_none_or(|(s, _)| score < *s) {
+            best = Some((score, cand));
+        }
+    }
+    let (_, best) = best.expect("at least one candidate is trained");
+    Ok(SearchResult {
+        best: best.check()?,
+        table,
+    })
+}
+
+/// Checks the grid and budget of a search.
+fn validate_space(space: &SearchSpace) -> Result<(), SeqError> {
     let bad = |name: &'static str, reason: &str| SeqError::InvalidParameter {
         name,
         reason: reason.into(),
@@ -95,17 +134,11 @@ pub fn select_hyperparameters(
     if !(space.test_fraction > 0.0 && space.test_fraction < 1.0) {
         return Err(bad("test_fraction", "must be in (0, 1)"));
     }
-    base.validate()?;
-    check_matrix("x", x, None, x.ncols())?;
-    check_matrix("y", y, Some(x.nrows()), y.ncols())?;
-    // A different stream from fit's validation split (seed + 1), so the test rows are not reused.
-    let (tr, te) = split_indices(
-        x.nrows(),
-        space.test_fraction,
-        base.get_seed().wrapping_add(1),
-    )?;
-    let (x_tr, y_tr) = (select_rows(x, &tr), select_rows(y, &tr));
-    let (x_te, y_te) = (select_rows(x, &te), select_rows(y, &te));
+    Ok(())
+}
+
+/// Test-set MSE averaged over outputs, each output's error divided by its test variance.
+fn relative_test_mse(pred: &DMatrix<f64>, y_te: &DMatrix<f64>) -> f64 {
     let var: Vec<f64> = y_te
         .column_iter()
         .map(|c| {
@@ -113,38 +146,14 @@ pub fn select_hyperparameters(
             (c.iter().map(|v| (v - m).powi(2)).sum::<f64>() / c.len() as f64).max(f64::MIN_POSITIVE)
         })
         .collect();
-    let mut table = Vec::new();
-    let mut best: Option<(f64, LstmParams)> = None;
-    let grid = space
-        .layers
-        .iter()
-        .flat_map(|&l| space.hidden.iter().map(move |&h| (h, l)));
-    for (hidden, layers) in grid.take(space.max_candidates) {
-        let cand = base.clone().hidden(hidden).layers(layers);
-        let model = cand.clone().epochs(space.max_epochs).fit(&x_tr, &y_tr)?;
-        let pred = model.predict(&x_te)?;
-        let score = (0..y.ncols())
-            .map(|c| {
-                (0..x_te.nrows())
-                    .map(|r| (pred[(r, c)] - y_te[(r, c)]).powi(2))
-                    .sum::<f64>()
-                    / x_te.nrows() as f64
-                    / var[c]
-            })
-            .sum::<f64>()
-            / y.ncols() as f64;
-        let h = model.history();
-        table.push(CandidateScore {
-            hidden,
-            layers,
-            test_score: score,
-            epochs_run: h.train_loss.len(),
-            seconds: h.wall_seconds,
-        });
-        if best.as_ref().is_none_or(|(s, _)| score < *s) {
-            best = Some((score, cand));
-        }
-    }
-    let (_, best) = best.expect("at least one candidate is trained");
-    Ok(SearchResult { best, table })
+    (0..y_te.ncols())
+        .map(|c| {
+            (0..y_te.nrows())
+                .map(|r| (pred[(r, c)] - y_te[(r, c)]).powi(2))
+                .sum::<f64>()
+                / y_te.nrows() as f64
+                / var[c]
+        })
+        .sum::<f64>()
+        / y_te.ncols() as f64
 }

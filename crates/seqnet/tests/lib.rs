@@ -1,5 +1,7 @@
 //! Integration tests for `seqnet` (one binary; modules under tests/lib/).
 
+#[path = "lib/config.rs"]
+mod config;
 #[path = "lib/errors.rs"]
 mod errors;
 #[path = "lib/gradients.rs"]
@@ -8,6 +10,8 @@ mod gradients;
 mod learning;
 #[path = "lib/persistence.rs"]
 mod persistence;
+#[path = "lib/reproducibility.rs"]
+mod reproducibility;
 #[path = "lib/strategies.rs"]
 mod strategies;
 #[path = "lib/torch.rs"]

@@ -10,11 +10,12 @@
 //! interval is over-confident and the force field is not corrected. This test prints those
 //! numbers so a change that fixes or worsens them is visible.
 
-use bamudi::paper::{ReproduceOptions, reproduce};
+use bamudi::observe::Silent;
+use bamudi_gate::paper::{ReproduceOptions, reproduce};
 
 #[test]
 fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
-    let report = reproduce(&ReproduceOptions::quick(), |_, _, _| Ok(())).unwrap();
+    let report = reproduce(&ReproduceOptions::quick(), &Silent, |_, _, _| Ok(())).unwrap();
     assert_eq!(report.scenarios.len(), 2);
     for s in &report.scenarios {
         let t = &s.theta_posterior;
@@ -26,8 +27,8 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             s.rho_star,
             t.mean,
             t.sd,
-            t.ci95[0],
-            t.ci95[1],
+            t.ci95.0,
+            t.ci95.1,
             s.theta_true,
             t0.mean,
             t0.sd,
@@ -81,8 +82,8 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             c.rho_star,
             c.theta_posterior.mean,
             c.theta_posterior.sd,
-            c.theta_posterior.ci95[0],
-            c.theta_posterior.ci95[1],
+            c.theta_posterior.ci95.0,
+            c.theta_posterior.ci95.1,
             c.force_rmse.normal_before,
             c.force_rmse.normal_after,
             c.strain_rmse.with_discrepancy,

@@ -1,7 +1,6 @@
 //! What a re-calibration would take back: a load nuisance fitted jointly with each candidate.
 //!
-//! BA-MUDI's discrepancy `δ(x)` is a free smooth function of the load inputs `x = [h_up,
-//! h_down]` at loaded rows. When the data carry an effect the model lacks, the first
+//! BA-MUDI's discrepancy `δ(x)` is a free smooth function of the model inputs at loaded rows. When the data carry an effect the model lacks, the first
 //! calibration absorbs the part of the effect that looks like a function of the load (on the
 //! thermal record ρ* fell to 0.26), and the residual shows the effect *minus* that part. A
 //! candidate fitted to this residual alone is scored against a distorted target, and a generic
@@ -10,17 +9,18 @@
 //! (as the discrepancy is), estimates the effect as if the calibration had not absorbed any of
 //! it: the Frisch-Waugh-Lovell view of "add the effect, then re-calibrate".
 //!
-//! The basis is a polynomial in the standardised head `s` and lower level `d` over the loaded
-//! calibration rows: `1, s, d, s², s d, d², s³, s⁴` (the head gets the higher powers because
-//! the strain along a filling or emptying is a curved function of head; the full-lift states
-//! only spread over a small patch of `(s, d)`).
+//! The basis is a polynomial in the standardised load `s` (a gate's head) and its companion
+//! input `d` (the lower level) over the loaded calibration rows:
+//! `1, s, d, s², s d, d², s³, s⁴` (the load gets the higher powers because the response along a
+//! filling or emptying is a curved function of it; the full-lift states only spread over a
+//! small patch of `(s, d)`).
 
-use super::EffectSpec;
-use super::bamudi_calibrator::gate_open;
-use super::effects::{self, FitContext, Fitted};
+use super::config::LoadSpec;
+use super::effect::{Effect, FitContext, Fitted};
 use super::stats::{ols, select_rows};
-use crate::BamudiError;
+use crate::error::Result;
 use nalgebra::DMatrix;
+use std::sync::Arc;
 
 /// Alternations between the effect and the nuisance. Backfitting converges to the joint least
 /// squares fit for linear terms, at a rate set by how collinear the two are; the cap bounds
@@ -31,31 +31,34 @@ const MAX_ALTERNATIONS: usize = 8;
 /// the alternation stops: far below the 5 % held-out improvements the loop decides on.
 const ALTERNATION_TOL: f64 = 1e-4;
 
-/// The load basis at every row (`n x 8`, zero where the gate is open).
+/// The load basis at every row (`n x 8`, zero where the model is unloaded).
 #[derive(Debug, Clone)]
 pub(crate) struct LoadNuisance {
     basis: DMatrix<f64>,
 }
 
 impl LoadNuisance {
-    /// Builds the basis from rows `x = [h_up, h_down]` (in), standardised over the loaded rows
-    /// among `cal`. `None` when fewer loaded calibration rows than twice the basis size exist.
-    pub(crate) fn new(x: &DMatrix<f64>, cal: &[usize]) -> Option<Self> {
+    /// Builds the basis from the model inputs `x` and the declared `load`, standardised over
+    /// the loaded rows among `cal`. `None` when fewer loaded calibration rows than twice the
+    /// basis size exist.
+    pub(crate) fn new(x: &DMatrix<f64>, load: &LoadSpec, cal: &[usize]) -> Option<Self> {
         const P: usize = 8;
-        let loaded = |i: usize| !gate_open(&[x[(i, 0)], x[(i, 1)]]);
+        let row = |i: usize| -> Vec<f64> { x.row(i).iter().copied().collect() };
+        let loaded = |i: usize| !load.unloaded(&row(i));
         let rows: Vec<usize> = cal.iter().copied().filter(|&i| loaded(i)).collect();
         if rows.len() < 2 * P {
             return None;
         }
-        let head = |i: usize| x[(i, 0)] - x[(i, 1)];
-        let (sm, ss) = mean_sd(rows.iter().map(|&i| head(i)));
-        let (dm, ds) = mean_sd(rows.iter().map(|&i| x[(i, 1)]));
+        let level = |i: usize| load.value(&row(i));
+        let c = load.companion;
+        let (sm, ss) = mean_sd(rows.iter().map(|&i| level(i)));
+        let (dm, ds) = mean_sd(rows.iter().map(|&i| x[(i, c)]));
         let basis = DMatrix::from_fn(x.nrows(), P, |i, k| {
             if !loaded(i) {
                 return 0.0;
             }
-            let s = (head(i) - sm) / ss;
-            let d = (x[(i, 1)] - dm) / ds;
+            let s = (level(i) - sm) / ss;
+            let d = (x[(i, c)] - dm) / ds;
             [1.0, s, d, s * s, s * d, d * d, s * s * s, s * s * s * s][k]
         });
         Some(Self { basis })
@@ -86,21 +89,22 @@ pub(crate) struct JointFit {
     pub nuisance: DMatrix<f64>,
 }
 
-/// Fits `spec` to `r` jointly with the nuisance by alternating the two fits on the
+/// Fits `effect` to `r` jointly with the nuisance by alternating the two fits on the
 /// calibration rows; without a nuisance it is the plain fit. `None` when the effect does not
-/// apply (see [`effects::fit`]).
+/// apply.
 pub(crate) fn fit_jointly(
-    spec: &EffectSpec,
-    ctx: &FitContext,
+    effect: &Arc<dyn Effect>,
+    ctx: &FitContext<'_>,
     r: &DMatrix<f64>,
     nuisance: Option<&LoadNuisance>,
-) -> Result<Option<JointFit>, BamudiError> {
+) -> Result<Option<JointFit>> {
     let zero = DMatrix::zeros(r.nrows(), r.ncols());
+    let spec = effect;
     let Some(nu) = nuisance else {
-        let Some(fitted) = effects::fit(spec, ctx, r)? else {
+        let Some(fitted) = effect.clone().fit(ctx, r)? else {
             return Ok(None);
         };
-        let effect = effects::contribution(&fitted, ctx)?;
+        let effect = fitted.term.contribution(ctx)?;
         return Ok(Some(JointFit {
             fitted,
             effect,
@@ -111,12 +115,12 @@ pub(crate) fn fit_jointly(
     let mut n_c = zero;
     let mut last: Option<JointFit> = None;
     for _ in 0..MAX_ALTERNATIONS {
-        let Some(fitted) = effects::fit(spec, ctx, &(r - &n_c))? else {
+        let Some(fitted) = spec.clone().fit(ctx, &(r - &n_c))? else {
             // the effect stopped applying on the partial residual (e.g. no step left):
             // keep the last fit that did
             break;
         };
-        let effect = effects::contribution(&fitted, ctx)?;
+        let effect = fitted.term.contribution(ctx)?;
         let n_new = nu.fit(&(r - &effect), ctx.cal);
         let moved = match &last {
             Some(l) => select_rows(&(&effect + &n_new - &l.effect - &l.nuisance), ctx.cal).norm(),

@@ -87,94 +87,7 @@ pub(crate) fn chi2_sf(x: f64, k: f64) -> f64 {
     if x <= 0.0 {
         return 1.0;
     }
-    upper_regularized_gamma(k / 2.0, x / 2.0)
-}
-
-/// `Q(a, x) = Γ(a, x) / Γ(a)` by series (x < a + 1) or continued fraction (Numerical Recipes).
-fn upper_regularized_gamma(a: f64, x: f64) -> f64 {
-    let ln_front = a * x.ln() - x - ln_gamma(a);
-    if x < a + 1.0 {
-        let (mut sum, mut term, mut ap) = (1.0 / a, 1.0 / a, a);
-        for _ in 0..500 {
-            ap += 1.0;
-            term *= x / ap;
-            sum += term;
-            if term.abs() < sum.abs() * 1e-15 {
-                break;
-            }
-        }
-        (1.0 - sum * ln_front.exp()).clamp(0.0, 1.0)
-    } else {
-        let tiny = 1e-300;
-        let mut b = x + 1.0 - a;
-        let mut c = 1.0 / tiny;
-        let mut d = 1.0 / b;
-        let mut h = d;
-        for i in 1..500 {
-            let an = -(i as f64) * (i as f64 - a);
-            b += 2.0;
-            d = an * d + b;
-            if d.abs() < tiny {
-                d = tiny;
-            }
-            c = b + an / c;
-            if c.abs() < tiny {
-                c = tiny;
-            }
-            d = 1.0 / d;
-            let del = d * c;
-            h *= del;
-            if (del - 1.0).abs() < 1e-15 {
-                break;
-            }
-        }
-        (ln_front.exp() * h).clamp(0.0, 1.0)
-    }
-}
-
-/// Lanczos approximation of `ln Γ(x)`, `x > 0`.
-fn ln_gamma(x: f64) -> f64 {
-    const G: [f64; 6] = [
-        76.180_091_729_471_46,
-        -86.505_320_329_416_77,
-        24.014_098_240_830_91,
-        -1.231_739_572_450_155,
-        0.120_865_097_386_617_9e-2,
-        -0.539_523_938_495_3e-5,
-    ];
-    let tmp = x + 5.5 - (x + 0.5) * (x + 5.5).ln();
-    let mut ser = 1.000_000_000_190_015;
-    for (j, g) in G.iter().enumerate() {
-        ser += g / (x + 1.0 + j as f64);
-    }
-    -tmp + (2.506_628_274_631_000_5 * ser / x).ln()
-}
-
-/// Robust white-noise standard deviation of a series: MAD of first differences / (0.6745 √2).
-/// Slow effects (drift, seasons) barely change first differences, and rare jumps (lockage
-/// transitions) are outliers the median ignores.
-pub(crate) fn noise_sd_from_differences(r: &[f64]) -> f64 {
-    let mut d: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    let med = median(&mut d);
-    let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
-    median(&mut dev) / 0.6745 / std::f64::consts::SQRT_2
-}
-
-/// Median (sorts `v` in place; 0 when `v` is empty).
-pub(crate) fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    statrs::function::gamma::gamma_ur(k / 2.0, x / 2.0)
 }
 
 /// Adequacy statistics of one gauge's residuals on one window.
@@ -182,12 +95,12 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
 pub struct GaugeCheck {
     /// Gauge name.
     pub gauge: String,
-    /// Mean residual (microstrain).
+    /// Mean residual (output units).
     pub bias: f64,
     /// Bias divided by its standard error, the standard error inflated for lag-1
     /// autocorrelation (effective sample size `n (1 − ρ₁)/(1 + ρ₁)`).
     pub bias_z: f64,
-    /// Root mean square residual (microstrain).
+    /// Root mean square residual (output units).
     pub rmse: f64,
     /// Mean of squared standardised residuals `r² / predictive variance` (≈ 1 when the
     /// predictive variance is right).
@@ -247,7 +160,7 @@ pub(crate) fn adequacy(
     var: &DMatrix<f64>,
     rows: &[usize],
     gauges: &[String],
-    features: &super::Features,
+    features: &super::features::Features,
     th: &CheckThresholds,
 ) -> Adequacy {
     let n = rows.len();
@@ -258,75 +171,23 @@ pub(crate) fn adequacy(
     let mut checks = Vec::new();
     for (j, g) in gauges.iter().enumerate() {
         let rj: Vec<f64> = rows.iter().map(|&i| r[(i, j)]).collect();
-        let mean = rj.iter().sum::<f64>() / n as f64;
-        let sd =
-            (rj.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0).max(1.0)).sqrt();
-        let rho = autocorrelations(&rj, th.ljung_box_lags.max(1));
-        let lag1 = rho[0];
-        let n_eff = (n as f64 * (1.0 - lag1.max(0.0)) / (1.0 + lag1.max(0.0))).max(2.0);
-        let bias_z = if sd > 0.0 {
-            mean / (sd / n_eff.sqrt())
-        } else {
-            0.0
-        };
-        let variance_ratio = rows
-            .iter()
-            .map(|&i| r[(i, j)].powi(2) / var[(i, j)].max(1e-300))
-            .sum::<f64>()
-            / n as f64;
-        let (q, p) = ljung_box(&rj, th.ljung_box_lags);
-        if bias_z.abs() > z_crit {
-            failures.push(format!(
-                "{window}: {g} bias {mean:.3} microstrain (z = {bias_z:.1})"
-            ));
-        }
-        // the mean of n squared standard normals has sd sqrt(2/n)
-        let var_tol = z_crit * (2.0 / n as f64).sqrt();
-        if (variance_ratio - 1.0).abs() > var_tol.max(0.25) {
-            failures.push(format!(
-                "{window}: {g} residual variance / predictive variance = {variance_ratio:.2}"
-            ));
-        }
-        if p < alpha {
-            failures.push(format!(
-                "{window}: {g} autocorrelated (lag-1 {lag1:.2}, Ljung-Box p = {p:.1e})"
-            ));
-        }
-        checks.push(GaugeCheck {
-            gauge: g.clone(),
-            bias: mean,
-            bias_z,
-            rmse: (rj.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt(),
-            variance_ratio,
-            lag1_autocorrelation: lag1,
-            ljung_box_q: q,
-            ljung_box_p: p,
-        });
+        let vj: Vec<f64> = rows.iter().map(|&i| var[(i, j)]).collect();
+        let check = gauge_check(g, &rj, &vj, th.ljung_box_lags);
+        failures.extend(check.failures(window, n, z_crit, alpha));
+        checks.push(check);
     }
     // a correlation of white noise with any series has sd ≈ 1/sqrt(n)
     let corr_crit = z_crit / (n as f64).sqrt();
     let mut correlations = Vec::new();
     for (name, col) in features.names.iter().zip(&features.cols) {
-        let c: Vec<f64> = rows.iter().map(|&i| col[i]).collect();
-        let mut best = (0.0, 0);
-        for j in 0..gauges.len() {
-            let rj: Vec<f64> = rows.iter().map(|&i| r[(i, j)]).collect();
-            let rho = correlation(&c, &rj).abs();
-            if rho > best.0 {
-                best = (rho, j);
-            }
-        }
-        if best.0 > corr_crit {
+        let c = largest_correlation(name, col, r, rows, gauges);
+        if c.max_abs_correlation > corr_crit {
             failures.push(format!(
                 "{window}: residual of {} correlates with {name} (|r| = {:.2})",
-                gauges[best.1], best.0
+                c.gauge, c.max_abs_correlation
             ));
         }
-        correlations.push(CovariateCorrelation {
-            covariate: name.clone(),
-            max_abs_correlation: best.0,
-            gauge: gauges[best.1].clone(),
-        });
+        correlations.push(c);
     }
     correlations.sort_by(|a, b| b.max_abs_correlation.total_cmp(&a.max_abs_correlation));
     Adequacy {
@@ -338,54 +199,93 @@ pub(crate) fn adequacy(
     }
 }
 
-/// Upper quantile `z` with `P(Z > z) = p` of the standard normal (Acklam's rational
-/// approximation, relative error < 1.2e-9, ample for test thresholds).
-pub(crate) fn normal_quantile_upper(p: f64) -> f64 {
-    -normal_quantile(p.clamp(1e-300, 0.5))
+/// The statistics of one gauge's residuals `rj` with predictive variances `vj`.
+fn gauge_check(g: &str, rj: &[f64], vj: &[f64], lags: usize) -> GaugeCheck {
+    let n = rj.len();
+    let mean = rj.iter().sum::<f64>() / n as f64;
+    let sd =
+        (rj.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n as f64 - 1.0).max(1.0)).sqrt();
+    let lag1 = autocorrelations(rj, lags.max(1))[0];
+    let n_eff = (n as f64 * (1.0 - lag1.max(0.0)) / (1.0 + lag1.max(0.0))).max(2.0);
+    let bias_z = if sd > 0.0 {
+        mean / (sd / n_eff.sqrt())
+    } else {
+        0.0
+    };
+    let variance_ratio = rj
+        .iter()
+        .zip(vj)
+        .map(|(r, v)| r.powi(2) / v.max(1e-300))
+        .sum::<f64>()
+        / n as f64;
+    let (q, p) = ljung_box(rj, lags);
+    GaugeCheck {
+        gauge: g.to_string(),
+        bias: mean,
+        bias_z,
+        rmse: (rj.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt(),
+        variance_ratio,
+        lag1_autocorrelation: lag1,
+        ljung_box_q: q,
+        ljung_box_p: p,
+    }
 }
 
-#[allow(clippy::excessive_precision)] // published coefficients, kept verbatim
-fn normal_quantile(p: f64) -> f64 {
-    const A: [f64; 6] = [
-        -3.969683028665376e1,
-        2.209460984245205e2,
-        -2.759285104469687e2,
-        1.383577518672690e2,
-        -3.066479806614716e1,
-        2.506628277459239,
-    ];
-    const B: [f64; 5] = [
-        -5.447609879822406e1,
-        1.615858368580409e2,
-        -1.556989798598866e2,
-        6.680131188771972e1,
-        -1.328068155288572e1,
-    ];
-    const C: [f64; 6] = [
-        -7.784894002430293e-3,
-        -3.223964580411365e-1,
-        -2.400758277161838,
-        -2.549732539343734,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    const D: [f64; 4] = [
-        7.784695709041462e-3,
-        3.224671290700398e-1,
-        2.445134137142996,
-        3.754408661907416,
-    ];
-    let p_low = 0.02425;
-    if p < p_low {
-        let q = (-2.0 * p.ln()).sqrt();
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+impl GaugeCheck {
+    /// The failed checks of this gauge at the critical `z` and the test level `alpha`.
+    fn failures(&self, window: &str, n: usize, z_crit: f64, alpha: f64) -> Vec<String> {
+        let (g, mut out) = (&self.gauge, Vec::new());
+        if self.bias_z.abs() > z_crit {
+            out.push(format!(
+                "{window}: {g} bias {:.3} (z = {:.1})",
+                self.bias, self.bias_z
+            ));
+        }
+        // the mean of n squared standard normals has sd sqrt(2/n)
+        let var_tol = z_crit * (2.0 / n as f64).sqrt();
+        if (self.variance_ratio - 1.0).abs() > var_tol.max(0.25) {
+            out.push(format!(
+                "{window}: {g} residual variance / predictive variance = {:.2}",
+                self.variance_ratio
+            ));
+        }
+        if self.ljung_box_p < alpha {
+            out.push(format!(
+                "{window}: {g} autocorrelated (lag-1 {:.2}, Ljung-Box p = {:.1e})",
+                self.lag1_autocorrelation, self.ljung_box_p
+            ));
+        }
+        out
     }
+}
+
+/// The gauge whose residual correlates most (in absolute value) with the feature `col`.
+fn largest_correlation(
+    name: &str,
+    col: &[f64],
+    r: &DMatrix<f64>,
+    rows: &[usize],
+    gauges: &[String],
+) -> CovariateCorrelation {
+    let c: Vec<f64> = rows.iter().map(|&i| col[i]).collect();
+    let mut best = (0.0, 0);
+    for j in 0..gauges.len() {
+        let rj: Vec<f64> = rows.iter().map(|&i| r[(i, j)]).collect();
+        let rho = correlation(&c, &rj).abs();
+        if rho > best.0 {
+            best = (rho, j);
+        }
+    }
+    CovariateCorrelation {
+        covariate: name.to_string(),
+        max_abs_correlation: best.0,
+        gauge: gauges[best.1].clone(),
+    }
+}
+
+/// Upper quantile `z` with `P(Z > z) = p` of the standard normal.
+pub(crate) fn normal_quantile_upper(p: f64) -> f64 {
+    std::f64::consts::SQRT_2 * statrs::function::erf::erfc_inv(2.0 * p.clamp(1e-300, 0.5))
 }
 
 #[cfg(test)]
@@ -402,7 +302,7 @@ mod tests {
 
     #[test]
     fn normal_quantile_matches_tables() {
-        // 1.959964 and 3.290527 from tables, Acklam's approximation is good to 1e-8 relative
+        // 1.959964 and 3.290527 from tables (6 decimals)
         assert!((normal_quantile_upper(0.025) - 1.959_964).abs() < 1e-5);
         assert!((normal_quantile_upper(0.0005) - 3.290_527).abs() < 1e-5);
     }

@@ -1,11 +1,11 @@
 //! From a parsed deck to a supported, factored shell model.
 
 use super::{InpElementType, InpModel, NodeRef};
-use crate::GateError;
-use crate::beam::{Beam, BeamMaterial, BeamSectionProperties};
+use crate::error::GateError;
+use crate::fe::beam::{Beam, BeamMaterial, BeamSectionProperties};
+use crate::fe::shell::ShellMaterial;
+use crate::fe::tri::ShellTriangle;
 use crate::fe::{GeneralElement, QuadElement, ShellMesh, ShellModel, Support, element_dofs};
-use crate::shell::ShellMaterial;
-use crate::tri::ShellTriangle;
 use nalgebra::{DMatrix, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
@@ -70,7 +70,7 @@ impl InpModel {
 
     /// The mesh: `S4`/`S4R` quadrilaterals and `S3` triangles with the thickness of their
     /// `*SHELL SECTION`, `B31` beams with their `*BEAM SECTION` / `*BEAM GENERAL SECTION`
-    /// (see [`crate::beam`]). Elements without a section, shell sections with different
+    /// (see [`crate::fe::beam`]). Elements without a section, shell sections with different
     /// materials and unsupported beam section types are errors ([`GateError::InpBuild`]).
     ///
     /// ```
@@ -491,7 +491,7 @@ impl InpModel {
     }
 
     /// Builds the supported, factored shell model (supports of the model level and of the
-    /// first step) with drilling penalty factor `drilling_penalty` (see [`crate::shell`];
+    /// first step) with drilling penalty factor `drilling_penalty` (see [`crate::fe::shell`];
     /// `1e-3` is the gate default).
     ///
     /// ```
@@ -668,13 +668,21 @@ impl ImportedModel {
     }
 
     /// Quadrilaterals containing a gauge point on their mid-plane, with normal parallel to
-    /// `side`: `(element index, ξ, η, ζ)` with `ζ = ±t/2` the instrumented face (used by the
-    /// CalculiX comparison, which interpolates CalculiX's nodal strains on the same sites).
-    pub(crate) fn gauge_sites(
-        &self,
-        point: [f64; 3],
-        side: [f64; 3],
-    ) -> Vec<(usize, f64, f64, f64)> {
+    /// `side`: `(element index, ξ, η, ζ)` with `ζ = ±t/2` the instrumented face. A
+    /// comparison with another solver (the CalculiX cross-check of `xtask`) interpolates that
+    /// solver's nodal strains on the same sites.
+    ///
+    /// ```
+    /// # use mitergate::inp::InpModel;
+    /// # let deck = "*NODE\n1,0,0,0\n2,10,0,0\n3,10,1,0\n4,0,1,0\n*ELEMENT,TYPE=S4,ELSET=P\n1,1,2,3,4\n\
+    /// #  *MATERIAL,NAME=STEEL\n*ELASTIC\n29e6,0.3\n*SHELL SECTION,ELSET=P,MATERIAL=STEEL\n0.5\n\
+    /// #  *BOUNDARY\n1,ENCASTRE\n4,ENCASTRE\n";
+    /// let m = InpModel::parse(deck).unwrap().build(1e-3).unwrap();
+    /// let sites = m.gauge_sites([5.0, 0.5, 0.0], [0.0, 0.0, 1.0]);
+    /// assert_eq!(sites.len(), 1);
+    /// assert!((sites[0].1 - 0.0).abs() < 1e-12 && (sites[0].3 - 0.25).abs() < 1e-12);
+    /// ```
+    pub fn gauge_sites(&self, point: [f64; 3], side: [f64; 3]) -> Vec<(usize, f64, f64, f64)> {
         let s = Vector3::from(side).normalize();
         let mut out = Vec::new();
         for (e, quad) in self.model.quads().iter().enumerate() {
@@ -738,7 +746,7 @@ impl ImportedModel {
     /// Strain gauge functional (microstrain per unit full DOF, as `(dof, coefficient)`) of a
     /// gauge at `point` (on a plate mid-surface, in) on the face towards `side`, measuring
     /// along the in-plane `direction`; a point on an element edge averages the elements that
-    /// share it (as [`crate::GateModel`] gauges do).
+    /// share it (as [`crate::gate::GateModel`] gauges do).
     ///
     /// ```
     /// # use mitergate::inp::InpModel;

@@ -1,14 +1,12 @@
 //! Condensing an imported deck to a [`CondensedGate`]: the user contract ([`ImportSpec`]) and
 //! the [`CondensationSource`] of an [`ImportedModel`].
 
-use super::ImportedModel;
-use super::export::gauge_side;
-use crate::GateError;
-use crate::condense::{CondensationSource, SparseLoad, condense, sorted_unique};
-use crate::condensed::CondensedGate;
+use super::{ImportedModel, InpModel};
+use crate::condense::{CondensationSource, CondensedGate, SparseLoad, condense, sorted_unique};
+use crate::error::GateError;
+use crate::fe::loads::face_pressure_integrals;
 use crate::fe::{ShellModel, Support};
-use crate::loads::face_pressure_integrals;
-use crate::{GateModel, inp::InpModel};
+use crate::gate::GateModel;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 use std::collections::HashSet;
@@ -134,7 +132,7 @@ pub struct ImportSpec {
     /// Unit weight of water (lbf/in³, default 0.0361).
     pub unit_weight: f64,
     /// Drilling penalty factor used when [`CondensedGate::from_inp_str`] builds the model
-    /// (default `1e-3`, see [`crate::shell`]).
+    /// (default `1e-3`, see [`crate::fe::shell`]).
     pub drilling_penalty: f64,
     /// The strain gauges, in output order.
     pub gauges: Vec<ImportGauge>,
@@ -177,7 +175,7 @@ impl ImportSpec {
             .iter()
             .zip(gate.gauge_points())
             .map(|(g, p)| {
-                ImportGauge::new(&g.name, p, gauge_side(&g.location), g.direction)
+                ImportGauge::new(&g.name, p, g.location.instrumented_side(), g.direction)
                     .with_elset(&format!("GAUGE_{}", g.name.to_uppercase()))
             })
             .collect();
@@ -426,39 +424,8 @@ fn build_err(reason: impl Into<String>) -> GateError {
 impl<'a> ImportedLeaf<'a> {
     fn new(model: &'a ImportedModel, spec: &ImportSpec) -> Result<Self, GateError> {
         let frame = spec.validate()?;
-        let nodes = &model.mesh().mesh.nodes;
-        let height = |n: usize| {
-            Vector3::from(nodes[n]).dot(&Vector3::from(frame.vertical)) - spec.sill_elevation
-        };
-        let deck = model.deck();
         let set = spec.quoin_nset.to_uppercase();
-        if !deck.nsets.contains_key(&set) {
-            return Err(build_err(format!(
-                "the quoin node set {set} (ImportSpec::quoin_nset) is not defined in the deck \
-                 (*NSET, NSET={set})"
-            )));
-        }
-        let mut quoin_nodes = model.node_set(&set)?;
-        quoin_nodes.sort_by(|&a, &b| height(a).total_cmp(&height(b)));
-        quoin_nodes.dedup();
-        let quoin_heights: Vec<f64> = quoin_nodes.iter().map(|&n| height(n)).collect();
-        let id = |n: usize| model.mesh().node_ids[n];
-        if quoin_nodes.len() < 2 {
-            return Err(build_err(format!(
-                "quoin node set {set} needs at least 2 nodes"
-            )));
-        }
-        for (w, nw) in quoin_heights.windows(2).zip(quoin_nodes.windows(2)) {
-            if w[1] <= w[0] {
-                return Err(build_err(format!(
-                    "quoin nodes {} and {} of {set} are at the same height {} in: the quoin \
-                     must be one line of nodes, one per height",
-                    id(nw[0]),
-                    id(nw[1]),
-                    w[0]
-                )));
-            }
-        }
+        let (quoin_nodes, quoin_heights) = quoin_line(model, spec, &frame, &set)?;
         let top = *quoin_heights.last().expect("2 nodes");
         let quoin_height = spec.quoin_height.unwrap_or(top);
         let tol = 1e-9 * quoin_height;
@@ -469,21 +436,7 @@ impl<'a> ImportedLeaf<'a> {
                 quoin_heights[0]
             )));
         }
-        let quoin: HashSet<usize> = quoin_nodes.iter().copied().collect();
-        for s in model.shell_model().supports() {
-            let node = match *s {
-                Support::Fixed { node, dof } if dof < 3 => node,
-                Support::Roller { node, .. } => node,
-                Support::Fixed { .. } => continue,
-            };
-            if quoin.contains(&node) {
-                return Err(build_err(format!(
-                    "quoin node {} of {set} is supported in translation: the quoin contact \
-                     forces must enter as loads (remove its *BOUNDARY / *EQUATION)",
-                    id(node)
-                )));
-            }
-        }
+        check_quoin_unsupported(model, &quoin_nodes, &set)?;
         let gauges = spec
             .gauges
             .iter()
@@ -507,6 +460,72 @@ impl<'a> ImportedLeaf<'a> {
         Vector3::from(self.model.mesh().mesh.nodes[n]).dot(&Vector3::from(self.frame.vertical))
             - self.sill
     }
+}
+
+/// The nodes of the quoin node set `set` sorted by height above the sill, and their heights:
+/// at least two, one per height.
+fn quoin_line(
+    model: &ImportedModel,
+    spec: &ImportSpec,
+    frame: &Frame,
+    set: &str,
+) -> Result<(Vec<usize>, Vec<f64>), GateError> {
+    let nodes = &model.mesh().mesh.nodes;
+    let height = |n: usize| {
+        Vector3::from(nodes[n]).dot(&Vector3::from(frame.vertical)) - spec.sill_elevation
+    };
+    if !model.deck().nsets.contains_key(set) {
+        return Err(build_err(format!(
+            "the quoin node set {set} (ImportSpec::quoin_nset) is not defined in the deck \
+             (*NSET, NSET={set})"
+        )));
+    }
+    let mut quoin_nodes = model.node_set(set)?;
+    quoin_nodes.sort_by(|&a, &b| height(a).total_cmp(&height(b)));
+    quoin_nodes.dedup();
+    let quoin_heights: Vec<f64> = quoin_nodes.iter().map(|&n| height(n)).collect();
+    let id = |n: usize| model.mesh().node_ids[n];
+    if quoin_nodes.len() < 2 {
+        return Err(build_err(format!(
+            "quoin node set {set} needs at least 2 nodes"
+        )));
+    }
+    for (w, nw) in quoin_heights.windows(2).zip(quoin_nodes.windows(2)) {
+        if w[1] <= w[0] {
+            return Err(build_err(format!(
+                "quoin nodes {} and {} of {set} are at the same height {} in: the quoin \
+                 must be one line of nodes, one per height",
+                id(nw[0]),
+                id(nw[1]),
+                w[0]
+            )));
+        }
+    }
+    Ok((quoin_nodes, quoin_heights))
+}
+
+/// Rejects quoin nodes supported in translation: the contact forces must enter as loads.
+fn check_quoin_unsupported(
+    model: &ImportedModel,
+    quoin_nodes: &[usize],
+    set: &str,
+) -> Result<(), GateError> {
+    let quoin: HashSet<usize> = quoin_nodes.iter().copied().collect();
+    for s in model.shell_model().supports() {
+        let node = match *s {
+            Support::Fixed { node, dof } if dof < 3 => node,
+            Support::Roller { node, .. } => node,
+            Support::Fixed { .. } => continue,
+        };
+        if quoin.contains(&node) {
+            return Err(build_err(format!(
+                "quoin node {} of {set} is supported in translation: the quoin contact \
+                 forces must enter as loads (remove its *BOUNDARY / *EQUATION)",
+                model.mesh().node_ids[node]
+            )));
+        }
+    }
+    Ok(())
 }
 
 fn gauge_functional(model: &ImportedModel, g: &ImportGauge) -> Result<SparseLoad, GateError> {
@@ -689,7 +708,7 @@ impl CondensedGate {
     /// ([`ImportedModel::condense`]).
     ///
     /// ```
-    /// use mitergate::condensed::CondensedGate;
+    /// use mitergate::condense::CondensedGate;
     /// use mitergate::inp::{export_gate, ExportOptions, ImportSpec};
     /// use mitergate::{GateConfig, GateModel};
     /// let mut cfg = GateConfig::default();
@@ -709,7 +728,7 @@ impl CondensedGate {
     /// Reads an `.inp` deck file and condenses it ([`CondensedGate::from_inp_str`]).
     ///
     /// ```
-    /// use mitergate::condensed::CondensedGate;
+    /// use mitergate::condense::CondensedGate;
     /// use mitergate::inp::ImportSpec;
     /// let e = CondensedGate::from_inp_file(std::path::Path::new("/no/gate.inp"), &ImportSpec::default(), 11);
     /// assert!(e.is_err());

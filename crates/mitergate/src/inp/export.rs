@@ -1,8 +1,7 @@
 //! Writing the gate model as an Abaqus / CalculiX deck.
 
-use crate::config::GaugeLocation;
-use crate::mesh::Member;
-use crate::{GateError, GateModel};
+use crate::error::GateError;
+use crate::gate::{GateModel, Member};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 
@@ -141,7 +140,6 @@ fn id_lines(out: &mut String, ids: impl IntoIterator<Item = usize>) {
 pub fn export_gate(gate: &GateModel, opts: &ExportOptions) -> Result<String, GateError> {
     let cfg = gate.config();
     let mesh = gate.mesh();
-    let shell = &mesh.shell;
     let load = gate.water_load(opts.h_up, opts.h_down)?;
     let mut out = String::new();
     let g = &cfg.geometry;
@@ -155,42 +153,7 @@ pub fn export_gate(gate: &GateModel, opts: &ExportOptions) -> Result<String, Gat
         num(opts.h_up),
         num(opts.h_down)
     );
-    out.push_str("*NODE, NSET=NALL\n");
-    for (i, p) in shell.nodes.iter().enumerate() {
-        let _ = writeln!(
-            out,
-            "{}, {}, {}, {}",
-            i + 1,
-            num(p[0]),
-            num(p[1]),
-            num(p[2])
-        );
-    }
-    // one *ELEMENT block per run of elements of the same member keeps the element order
-    let mut thickness: BTreeMap<String, f64> = BTreeMap::new();
-    let mut start = 0;
-    while start < shell.elements.len() {
-        let member = mesh.members[start];
-        let mut end = start;
-        while end < shell.elements.len() && mesh.members[end] == member {
-            end += 1;
-        }
-        let set = member_set(member);
-        let _ = writeln!(out, "*ELEMENT, TYPE=S4, ELSET={set}");
-        for e in start..end {
-            let el = &shell.elements[e];
-            let t = *thickness.entry(set.clone()).or_insert(el.thickness);
-            if t != el.thickness {
-                return Err(GateError::InvalidMesh(format!(
-                    "member {set} has elements of different thickness ({t}, {})",
-                    el.thickness
-                )));
-            }
-            let n = el.nodes.map(|n| n + 1);
-            let _ = writeln!(out, "{}, {}, {}, {}, {}", e + 1, n[0], n[1], n[2], n[3]);
-        }
-        start = end;
-    }
+    let thickness = write_mesh(&mut out, gate)?;
     let m = &cfg.material;
     let _ = writeln!(
         out,
@@ -226,12 +189,55 @@ pub fn export_gate(gate: &GateModel, opts: &ExportOptions) -> Result<String, Gat
     Ok(out)
 }
 
+/// Nodes (set `NALL`) and `S4` elements, one `*ELEMENT` block per run of elements of the same
+/// member (which keeps the element order); returns the thickness of each member's set.
+fn write_mesh(out: &mut String, gate: &GateModel) -> Result<BTreeMap<String, f64>, GateError> {
+    let mesh = gate.mesh();
+    let shell = &mesh.shell;
+    out.push_str("*NODE, NSET=NALL\n");
+    for (i, p) in shell.nodes.iter().enumerate() {
+        let _ = writeln!(
+            out,
+            "{}, {}, {}, {}",
+            i + 1,
+            num(p[0]),
+            num(p[1]),
+            num(p[2])
+        );
+    }
+    let mut thickness: BTreeMap<String, f64> = BTreeMap::new();
+    let mut start = 0;
+    while start < shell.elements.len() {
+        let member = mesh.members[start];
+        let mut end = start;
+        while end < shell.elements.len() && mesh.members[end] == member {
+            end += 1;
+        }
+        let set = member_set(member);
+        let _ = writeln!(out, "*ELEMENT, TYPE=S4, ELSET={set}");
+        for e in start..end {
+            let el = &shell.elements[e];
+            let t = *thickness.entry(set.clone()).or_insert(el.thickness);
+            if t != el.thickness {
+                return Err(GateError::InvalidMesh(format!(
+                    "member {set} has elements of different thickness ({t}, {})",
+                    el.thickness
+                )));
+            }
+            let n = el.nodes.map(|n| n + 1);
+            let _ = writeln!(out, "{}, {}, {}, {}, {}", e + 1, n[0], n[1], n[2], n[3]);
+        }
+        start = end;
+    }
+    Ok(thickness)
+}
+
 /// `GAUGE_<name>` element sets (elements whose face carries the gauge) and node sets (their
 /// nodes), with the gauge point, face and direction in a comment.
 fn write_gauge_sets(out: &mut String, gate: &GateModel) -> Result<(), GateError> {
     let cfg = gate.config();
     for (spec, point) in cfg.gauges.iter().zip(gate.gauge_points()) {
-        let side = gauge_side(&spec.location);
+        let side = spec.location.instrumented_side();
         let elements = gauge_elements(gate, point, side);
         if elements.is_empty() {
             return Err(GateError::GaugeNotOnMesh {
@@ -257,15 +263,6 @@ fn write_gauge_sets(out: &mut String, gate: &GateModel) -> Result<(), GateError>
         id_lines(out, nodes.iter().map(|n| n + 1));
     }
     Ok(())
-}
-
-/// Unit vector towards the instrumented face of a gauge.
-pub(crate) fn gauge_side(loc: &GaugeLocation) -> [f64; 3] {
-    match loc {
-        GaugeLocation::GirderWeb { .. } => [0.0, 0.0, 1.0],
-        GaugeLocation::GirderFlange { .. } => [0.0, 1.0, 0.0],
-        GaugeLocation::Point { side, .. } => *side,
-    }
 }
 
 /// Elements containing `point` on their mid-plane with normal parallel to `side`.

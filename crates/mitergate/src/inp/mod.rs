@@ -3,7 +3,7 @@
 //!
 //! # Export
 //!
-//! [`export_gate`] writes the meshed leaf of a [`crate::GateModel`] as a CalculiX-compatible
+//! [`export_gate`] writes the meshed leaf of a [`crate::gate::GateModel`] as a CalculiX-compatible
 //! deck: nodes, `S4` elements with one element set per structural member (`SKIN`,
 //! `GIRDER_WEB_3`, `GIRDER_FLANGE_3`, `DIAPHRAGM_1`, `QUOIN_PLATE`, `MITER_PLATE`,
 //! `QUOIN_BEARING_WEB`, `MITER_BEARING_WEB`), one `*SHELL SECTION` per member, the steel
@@ -41,15 +41,15 @@
 //! Keywords and parameters are case-insensitive; set and material names are upper-cased (Abaqus
 //! names are case-insensitive). `**` starts a comment line. A keyword line ending in a comma
 //! continues on the next line; `*ELEMENT` data lines continue until the element has all its
-//! nodes. Any other keyword is a [`GateError::InpParse`](crate::GateError::InpParse) naming the line and the keyword.
+//! nodes. Any other keyword is a [`GateError::InpParse`](crate::error::GateError::InpParse) naming the line and the keyword.
 //!
 //! # Building a stiffness model from a deck
 //!
 //! [`InpModel::build`] turns the deck into an [`ImportedModel`]: `S4` and `S4R` elements become
 //! our flat shell quadrilateral (QM6 membrane + MITC4 bending, fully integrated: `S4R`'s reduced
 //! integration and hourglass control are not reproduced); `S3` elements the flat triangle of
-//! [`crate::tri`] (Allman membrane with drilling rotations + DKT bending); `B31` elements the
-//! two-node Timoshenko beam of [`crate::beam`] (sections `RECT` and `GENERAL`, Abaqus's axis
+//! [`crate::fe::tri`] (Allman membrane with drilling rotations + DKT bending); `B31` elements the
+//! two-node Timoshenko beam of [`crate::fe::beam`] (sections `RECT` and `GENERAL`, Abaqus's axis
 //! convention), all assembled into one sparse system. All shell sections must use one
 //! isotropic material. Supports come from `*BOUNDARY` (homogeneous only), `*TRANSFORM` (one
 //! local translation fixed = a skewed roller; all three = fixed) and `*EQUATION` (`a ux + b uy
@@ -58,8 +58,8 @@
 //!
 //! # Condensing a deck: bring your own gate
 //!
-//! [`ImportedModel::condense`] (or [`crate::condensed::CondensedGate::from_inp_str`]) reduces
-//! the deck to the same [`crate::condensed::CondensedGate`] as [`crate::GateModel::condense`],
+//! [`ImportedModel::condense`] (or [`crate::condense::CondensedGate::from_inp_str`]) reduces
+//! the deck to the same [`crate::condense::CondensedGate`] as [`crate::gate::GateModel::condense`],
 //! through the same code. What the deck cannot say is given by an [`ImportSpec`] (builder or
 //! TOML sidecar): the quoin node set (default `QUOIN`), the skin element set carrying the
 //! water (default `SKIN`), the vertical and the sill, the quoin normal `n` (from the wall into
@@ -79,8 +79,9 @@
 //! ```
 
 mod build;
+mod cards;
 mod condense;
-pub(crate) mod export;
+mod export;
 mod parse;
 
 pub use build::{ImportedMesh, ImportedModel};
@@ -177,7 +178,7 @@ pub struct ShellSection {
     pub line: usize,
 }
 
-/// A `*BEAM SECTION` or `*BEAM GENERAL SECTION` (see [`crate::beam`] for the axes and the
+/// A `*BEAM SECTION` or `*BEAM GENERAL SECTION` (see [`crate::fe::beam`] for the axes and the
 /// supported section types).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BeamSection {

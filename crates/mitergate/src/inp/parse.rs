@@ -1,10 +1,11 @@
 //! The `.inp` reader: cards (keyword and data lines), then a small state machine per keyword.
 
+use super::cards::{Card, cards, dof, err, field, id, node_ref, number, param, required};
 use super::{
     BeamSection, Boundary, Cload, Equation, InpElement, InpElementType, InpMaterial, InpModel,
-    InpStep, NodeRef, ShellSection, Transform,
+    InpStep, ShellSection, Transform,
 };
-use crate::GateError;
+use crate::error::GateError;
 use std::path::Path;
 
 /// Keyword blocks whose data lines are skipped (output requests do not change the model).
@@ -17,19 +18,6 @@ const SKIPPED_KEYWORDS: [&str; 7] = [
     "NODE OUTPUT",
     "ELEMENT OUTPUT",
 ];
-
-/// One logical line of the deck.
-enum Card {
-    Keyword {
-        line: usize,
-        name: String,
-        params: Vec<(String, String)>,
-    },
-    Data {
-        line: usize,
-        fields: Vec<String>,
-    },
-}
 
 /// What the data lines that follow belong to.
 enum Block {
@@ -56,13 +44,6 @@ enum Block {
     Cload,
     Ignored,
     NoData(String),
-}
-
-fn err(line: usize, reason: impl Into<String>) -> GateError {
-    GateError::InpParse {
-        line,
-        reason: reason.into(),
-    }
 }
 
 impl InpModel {
@@ -112,124 +93,6 @@ impl InpModel {
     }
 }
 
-/// Splits the text into cards: drops comments and blank lines, joins continued keyword lines.
-fn cards(text: &str) -> Result<Vec<Card>, GateError> {
-    let mut out = Vec::new();
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
-    while let Some((no, raw)) = lines.next() {
-        if raw.is_empty() || raw.starts_with("**") {
-            continue;
-        }
-        if let Some(rest) = raw.strip_prefix('*') {
-            let mut full = rest.to_string();
-            while full.trim_end().ends_with(',') {
-                match lines.next() {
-                    Some((_, next)) if !next.starts_with("**") => full.push_str(next),
-                    _ => return Err(err(no, "keyword line ends with ',' but is not continued")),
-                }
-            }
-            out.push(keyword_card(no, &full)?);
-        } else {
-            let mut fields: Vec<String> = raw.split(',').map(|f| f.trim().to_string()).collect();
-            if fields.len() > 1 && fields.last().is_some_and(|f| f.is_empty()) {
-                fields.pop();
-            }
-            out.push(Card::Data { line: no, fields });
-        }
-    }
-    Ok(out)
-}
-
-fn keyword_card(line: usize, text: &str) -> Result<Card, GateError> {
-    let mut parts = text.split(',');
-    let name = parts
-        .next()
-        .unwrap_or("")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
-        .to_uppercase();
-    if name.is_empty() {
-        return Err(err(line, "empty keyword"));
-    }
-    let mut params = Vec::new();
-    for p in parts.map(str::trim).filter(|p| !p.is_empty()) {
-        let (k, v) = p.split_once('=').unwrap_or((p, ""));
-        let key = k.split_whitespace().collect::<Vec<_>>().join(" ");
-        params.push((key.to_uppercase(), v.trim().to_string()));
-    }
-    Ok(Card::Keyword { line, name, params })
-}
-
-fn param<'a>(params: &'a [(String, String)], key: &str) -> Option<&'a str> {
-    params
-        .iter()
-        .find(|(k, _)| k == key)
-        .map(|(_, v)| v.as_str())
-}
-
-fn required(
-    params: &[(String, String)],
-    key: &str,
-    kw: &str,
-    line: usize,
-) -> Result<String, GateError> {
-    match param(params, key) {
-        Some(v) if !v.is_empty() => Ok(v.to_uppercase()),
-        _ => Err(err(line, format!("*{kw} needs the parameter {key}="))),
-    }
-}
-
-fn number(field: &str, line: usize, what: &str) -> Result<f64, GateError> {
-    let v: Result<f64, _> = field.replace(['d', 'D'], "e").parse();
-    match v {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(err(
-            line,
-            format!("{what}: `{field}` is not a finite number"),
-        )),
-    }
-}
-
-fn id(field: &str, line: usize, what: &str) -> Result<u64, GateError> {
-    field.parse::<u64>().map_err(|_| {
-        err(
-            line,
-            format!("{what}: `{field}` is not a non-negative integer"),
-        )
-    })
-}
-
-fn dof(field: &str, line: usize) -> Result<usize, GateError> {
-    match field.parse::<usize>() {
-        Ok(d) if (1..=6).contains(&d) => Ok(d),
-        _ => Err(err(
-            line,
-            format!("degree of freedom `{field}` must be 1..6"),
-        )),
-    }
-}
-
-fn node_ref(field: &str) -> NodeRef {
-    match field.parse::<u64>() {
-        Ok(n) => NodeRef::Node(n),
-        Err(_) => NodeRef::Set(field.to_uppercase()),
-    }
-}
-
-fn field<'a>(
-    fields: &'a [String],
-    i: usize,
-    line: usize,
-    what: &str,
-) -> Result<&'a str, GateError> {
-    fields
-        .get(i)
-        .map(String::as_str)
-        .filter(|f| !f.is_empty())
-        .ok_or_else(|| err(line, format!("missing {what} (field {})", i + 1)))
-}
-
 struct Parser {
     model: InpModel,
     block: Block,
@@ -238,6 +101,7 @@ struct Parser {
 }
 
 impl Parser {
+    /// Closes the current block and opens the block of keyword `name`.
     fn keyword(
         &mut self,
         line: usize,
@@ -251,111 +115,137 @@ impl Parser {
         self.block = match name {
             "HEADING" => Block::Heading,
             "NODE" => Block::Node(param(params, "NSET").map(str::to_uppercase)),
-            "ELEMENT" => {
-                let t = required(params, "TYPE", name, line)?;
-                let kind = InpElementType::from_name(&t).ok_or_else(|| {
-                    err(
-                        line,
-                        format!("element TYPE={t} is not supported (S4, S4R, S3, B31)"),
-                    )
-                })?;
-                Block::Element {
-                    kind,
-                    elset: param(params, "ELSET").map(str::to_uppercase),
-                    pending: None,
-                }
-            }
+            "ELEMENT" => element_block(line, params)?,
             "NSET" | "ELSET" => Block::Set {
                 node: name == "NSET",
                 name: required(params, name, name, line)?,
                 generate: param(params, "GENERATE").is_some(),
             },
-            "MATERIAL" => {
-                let m = required(params, "NAME", name, line)?;
-                self.model
-                    .materials
-                    .insert(m.clone(), InpMaterial::default());
-                self.material = Some(m);
-                Block::NoData(name.into())
-            }
-            "ELASTIC" | "DENSITY" => {
-                let m = self
-                    .material
-                    .clone()
-                    .ok_or_else(|| err(line, format!("*{name} outside a *MATERIAL")))?;
-                match param(params, "TYPE").map(str::to_uppercase) {
-                    Some(t) if name == "ELASTIC" && t != "ISOTROPIC" => {
-                        return Err(err(
-                            line,
-                            format!("*ELASTIC, TYPE={t}: only ISOTROPIC is supported"),
-                        ));
-                    }
-                    _ => {}
-                }
-                if name == "ELASTIC" {
-                    Block::Elastic(m)
-                } else {
-                    Block::Density(m)
-                }
-            }
-            "SHELL SECTION" => {
-                if param(params, "COMPOSITE").is_some() {
-                    return Err(err(line, "*SHELL SECTION, COMPOSITE is not supported"));
-                }
-                self.model.shell_sections.push(ShellSection {
-                    elset: required(params, "ELSET", name, line)?,
-                    material: required(params, "MATERIAL", name, line)?,
-                    thickness: f64::NAN,
-                    line,
-                });
-                Block::ShellSection(self.model.shell_sections.len() - 1)
-            }
-            "BEAM SECTION" => {
-                self.model.beam_sections.push(BeamSection {
-                    elset: required(params, "ELSET", name, line)?,
-                    material: required(params, "MATERIAL", name, line)?,
-                    section: required(params, "SECTION", name, line)?,
-                    data: Vec::new(),
-                    direction: None,
-                    moduli: None,
-                    general_keyword: false,
-                    line,
-                });
-                Block::BeamSection(self.model.beam_sections.len() - 1, 0)
-            }
-            "BEAM GENERAL SECTION" => {
-                self.model.beam_sections.push(BeamSection {
-                    elset: required(params, "ELSET", name, line)?,
-                    material: param(params, "MATERIAL")
-                        .map(str::to_uppercase)
-                        .unwrap_or_default(),
-                    section: param(params, "SECTION").unwrap_or("GENERAL").to_uppercase(),
-                    data: Vec::new(),
-                    direction: None,
-                    moduli: None,
-                    general_keyword: true,
-                    line,
-                });
-                Block::BeamSection(self.model.beam_sections.len() - 1, 0)
+            "MATERIAL" | "ELASTIC" | "DENSITY" => self.material_block(line, name, params)?,
+            "SHELL SECTION" | "BEAM SECTION" | "BEAM GENERAL SECTION" => {
+                self.section_block(line, name, params)?
             }
             "BOUNDARY" => Block::Boundary,
-            "TRANSFORM" => {
-                let t = param(params, "TYPE").unwrap_or("R").to_uppercase();
-                if t != "R" {
-                    return Err(err(
-                        line,
-                        format!("*TRANSFORM, TYPE={t}: only TYPE=R (rectangular) is supported"),
-                    ));
-                }
-                self.model.transforms.push(Transform {
-                    nset: required(params, "NSET", name, line)?,
-                    a: [f64::NAN; 3],
-                    b: [f64::NAN; 3],
-                    line,
-                });
-                Block::Transform(self.model.transforms.len() - 1)
-            }
+            "TRANSFORM" => self.transform_block(line, name, params)?,
             "EQUATION" => Block::Equation(None),
+            "STEP" | "STATIC" | "CLOAD" | "END STEP" => self.step_block(line, name)?,
+            k if SKIPPED_KEYWORDS.contains(&k) => Block::Ignored,
+            other => {
+                return Err(err(line, format!("unsupported keyword *{other}")));
+            }
+        };
+        Ok(())
+    }
+
+    /// `*MATERIAL` opens a material; `*ELASTIC` and `*DENSITY` fill the open one.
+    fn material_block(
+        &mut self,
+        line: usize,
+        name: &str,
+        params: &[(String, String)],
+    ) -> Result<Block, GateError> {
+        if name == "MATERIAL" {
+            let m = required(params, "NAME", name, line)?;
+            self.model
+                .materials
+                .insert(m.clone(), InpMaterial::default());
+            self.material = Some(m);
+            return Ok(Block::NoData(name.into()));
+        }
+        let m = self
+            .material
+            .clone()
+            .ok_or_else(|| err(line, format!("*{name} outside a *MATERIAL")))?;
+        match param(params, "TYPE").map(str::to_uppercase) {
+            Some(t) if name == "ELASTIC" && t != "ISOTROPIC" => {
+                return Err(err(
+                    line,
+                    format!("*ELASTIC, TYPE={t}: only ISOTROPIC is supported"),
+                ));
+            }
+            _ => {}
+        }
+        Ok(if name == "ELASTIC" {
+            Block::Elastic(m)
+        } else {
+            Block::Density(m)
+        })
+    }
+
+    /// `*SHELL SECTION`, `*BEAM SECTION` and `*BEAM GENERAL SECTION`: the section, whose data
+    /// lines follow.
+    fn section_block(
+        &mut self,
+        line: usize,
+        name: &str,
+        params: &[(String, String)],
+    ) -> Result<Block, GateError> {
+        if name == "SHELL SECTION" {
+            if param(params, "COMPOSITE").is_some() {
+                return Err(err(line, "*SHELL SECTION, COMPOSITE is not supported"));
+            }
+            self.model.shell_sections.push(ShellSection {
+                elset: required(params, "ELSET", name, line)?,
+                material: required(params, "MATERIAL", name, line)?,
+                thickness: f64::NAN,
+                line,
+            });
+            return Ok(Block::ShellSection(self.model.shell_sections.len() - 1));
+        }
+        let general_keyword = name == "BEAM GENERAL SECTION";
+        let elset = required(params, "ELSET", name, line)?;
+        let (material, section) = if general_keyword {
+            (
+                param(params, "MATERIAL")
+                    .map(str::to_uppercase)
+                    .unwrap_or_default(),
+                param(params, "SECTION").unwrap_or("GENERAL").to_uppercase(),
+            )
+        } else {
+            (
+                required(params, "MATERIAL", name, line)?,
+                required(params, "SECTION", name, line)?,
+            )
+        };
+        self.model.beam_sections.push(BeamSection {
+            elset,
+            material,
+            section,
+            data: Vec::new(),
+            direction: None,
+            moduli: None,
+            general_keyword,
+            line,
+        });
+        Ok(Block::BeamSection(self.model.beam_sections.len() - 1, 0))
+    }
+
+    /// `*TRANSFORM, NSET=..., TYPE=R`: the frame, whose data line follows.
+    fn transform_block(
+        &mut self,
+        line: usize,
+        name: &str,
+        params: &[(String, String)],
+    ) -> Result<Block, GateError> {
+        let t = param(params, "TYPE").unwrap_or("R").to_uppercase();
+        if t != "R" {
+            return Err(err(
+                line,
+                format!("*TRANSFORM, TYPE={t}: only TYPE=R (rectangular) is supported"),
+            ));
+        }
+        self.model.transforms.push(Transform {
+            nset: required(params, "NSET", name, line)?,
+            a: [f64::NAN; 3],
+            b: [f64::NAN; 3],
+            line,
+        });
+        Ok(Block::Transform(self.model.transforms.len() - 1))
+    }
+
+    /// `*STEP`, `*STATIC`, `*CLOAD` and `*END STEP`: opens, fills and closes a step.
+    fn step_block(&mut self, line: usize, name: &str) -> Result<Block, GateError> {
+        Ok(match name {
             "STEP" => {
                 if self.step.is_some() {
                     return Err(err(line, "*STEP inside a *STEP (missing *END STEP)"));
@@ -380,7 +270,7 @@ impl Parser {
                 }
                 Block::Cload
             }
-            "END STEP" => {
+            _ => {
                 let step = self
                     .step
                     .take()
@@ -388,14 +278,10 @@ impl Parser {
                 self.model.steps.push(step);
                 Block::NoData(name.into())
             }
-            k if SKIPPED_KEYWORDS.contains(&k) => Block::Ignored,
-            other => {
-                return Err(err(line, format!("unsupported keyword *{other}")));
-            }
-        };
-        Ok(())
+        })
     }
 
+    /// Reads one data line into the current block.
     fn data(&mut self, line: usize, fields: Vec<String>) -> Result<(), GateError> {
         match &mut self.block {
             Block::None => return Err(err(line, "data line before the first keyword")),
@@ -403,17 +289,8 @@ impl Parser {
             Block::Ignored => {}
             Block::Heading => self.model.heading.push(fields.join(",")),
             Block::Node(nset) => {
-                let n = id(field(&fields, 0, line, "node id")?, line, "node id")?;
-                let mut x = [0.0; 3];
-                for (k, v) in x.iter_mut().enumerate() {
-                    if let Some(f) = fields.get(k + 1).filter(|f| !f.is_empty()) {
-                        *v = number(f, line, "node coordinate")?;
-                    }
-                }
-                self.model.nodes.push((n, x));
-                if let Some(s) = nset.clone() {
-                    self.model.nsets.entry(s).or_default().push(n);
-                }
+                let nset = nset.clone();
+                self.node_line(line, &fields, nset)?;
             }
             Block::Element { pending, .. } => {
                 let (first, mut acc) = pending.take().unwrap_or((line, Vec::new()));
@@ -429,32 +306,9 @@ impl Parser {
                 let (node, name, generate) = (*node, name.clone(), *generate);
                 self.set_line(line, node, &name, generate, &fields)?;
             }
-            Block::Elastic(m) => {
-                let e = number(
-                    field(&fields, 0, line, "Young's modulus")?,
-                    line,
-                    "Young's modulus",
-                )?;
-                let nu = number(
-                    field(&fields, 1, line, "Poisson's ratio")?,
-                    line,
-                    "Poisson's ratio",
-                )?;
-                let mat = self
-                    .model
-                    .materials
-                    .get_mut(m.as_str())
-                    .expect("material exists");
-                mat.elastic = Some((e, nu));
-            }
-            Block::Density(m) => {
-                let rho = number(field(&fields, 0, line, "density")?, line, "density")?;
-                let mat = self
-                    .model
-                    .materials
-                    .get_mut(m.as_str())
-                    .expect("material exists");
-                mat.density = Some(rho);
+            Block::Elastic(m) | Block::Density(m) => {
+                let (m, elastic) = (m.clone(), matches!(self.block, Block::Elastic(_)));
+                self.material_line(line, &fields, &m, elastic)?;
             }
             Block::ShellSection(i) => {
                 let s = &mut self.model.shell_sections[*i];
@@ -468,30 +322,7 @@ impl Parser {
                 )?;
             }
             Block::BeamSection(i, count) => {
-                let s = &mut self.model.beam_sections[*i];
-                let vals = fields
-                    .iter()
-                    .filter(|f| !f.is_empty())
-                    .map(|f| number(f, line, "beam section data"))
-                    .collect::<Result<Vec<_>, _>>()?;
-                match *count {
-                    0 => s.data = vals,
-                    1 if vals.len() == 3 => s.direction = Some([vals[0], vals[1], vals[2]]),
-                    1 => return Err(err(line, "beam section direction needs 3 components")),
-                    2 if s.general_keyword && vals.len() >= 2 => {
-                        s.moduli = Some([vals[0], vals[1]]);
-                    }
-                    2 if s.general_keyword => {
-                        return Err(err(line, "*BEAM GENERAL SECTION moduli line needs E, G"));
-                    }
-                    _ if s.general_keyword => {
-                        return Err(err(
-                            line,
-                            "*BEAM GENERAL SECTION takes at most 3 data lines here",
-                        ));
-                    }
-                    _ => return Err(err(line, "*BEAM SECTION takes at most 2 data lines")),
-                }
+                beam_section_line(line, &fields, &mut self.model.beam_sections[*i], *count)?;
                 *count += 1;
             }
             Block::Boundary => {
@@ -501,36 +332,67 @@ impl Parser {
                     None => self.model.boundaries.push(b),
                 }
             }
-            Block::Transform(i) => {
-                let t = &mut self.model.transforms[*i];
-                if !t.a[0].is_nan() {
-                    return Err(err(line, "*TRANSFORM takes one data line"));
-                }
-                if fields.len() < 6 {
-                    return Err(err(line, "*TRANSFORM needs 6 numbers (a, b)"));
-                }
-                for k in 0..3 {
-                    t.a[k] = number(&fields[k], line, "transform point a")?;
-                    t.b[k] = number(&fields[k + 3], line, "transform point b")?;
-                }
-            }
+            Block::Transform(i) => transform_line(line, &fields, &mut self.model.transforms[*i])?,
             Block::Equation(state) => {
                 equation_line(line, &fields, state, &mut self.model.equations)?
             }
             Block::Cload => {
-                let target = node_ref(field(&fields, 0, line, "node or node set")?);
-                let c = Cload {
-                    target,
-                    dof: dof(field(&fields, 1, line, "degree of freedom")?, line)?,
-                    value: number(field(&fields, 2, line, "load value")?, line, "load value")?,
-                    line,
-                };
+                let c = cload_line(line, &fields)?;
                 self.step
                     .as_mut()
                     .expect("checked at *CLOAD")
                     .cloads
                     .push(c);
             }
+        }
+        Ok(())
+    }
+
+    /// A `*NODE` line: id and coordinates (missing ones are 0), added to `nset` if given.
+    fn node_line(
+        &mut self,
+        line: usize,
+        fields: &[String],
+        nset: Option<String>,
+    ) -> Result<(), GateError> {
+        let n = id(field(fields, 0, line, "node id")?, line, "node id")?;
+        let mut x = [0.0; 3];
+        for (k, v) in x.iter_mut().enumerate() {
+            if let Some(f) = fields.get(k + 1).filter(|f| !f.is_empty()) {
+                *v = number(f, line, "node coordinate")?;
+            }
+        }
+        self.model.nodes.push((n, x));
+        if let Some(s) = nset {
+            self.model.nsets.entry(s).or_default().push(n);
+        }
+        Ok(())
+    }
+
+    /// An `*ELASTIC` (`E, ν`) or `*DENSITY` line of material `m`.
+    fn material_line(
+        &mut self,
+        line: usize,
+        fields: &[String],
+        m: &str,
+        elastic: bool,
+    ) -> Result<(), GateError> {
+        let mat = self.model.materials.get_mut(m).expect("material exists");
+        if elastic {
+            let e = number(
+                field(fields, 0, line, "Young's modulus")?,
+                line,
+                "Young's modulus",
+            )?;
+            let nu = number(
+                field(fields, 1, line, "Poisson's ratio")?,
+                line,
+                "Poisson's ratio",
+            )?;
+            mat.elastic = Some((e, nu));
+        } else {
+            let rho = number(field(fields, 0, line, "density")?, line, "density")?;
+            mat.density = Some(rho);
         }
         Ok(())
     }
@@ -677,6 +539,82 @@ impl Parser {
         }
         Ok(())
     }
+}
+
+/// `*ELEMENT, TYPE=..., ELSET=...`: the element block of a supported type.
+fn element_block(line: usize, params: &[(String, String)]) -> Result<Block, GateError> {
+    let t = required(params, "TYPE", "ELEMENT", line)?;
+    let kind = InpElementType::from_name(&t).ok_or_else(|| {
+        err(
+            line,
+            format!("element TYPE={t} is not supported (S4, S4R, S3, B31)"),
+        )
+    })?;
+    Ok(Block::Element {
+        kind,
+        elset: param(params, "ELSET").map(str::to_uppercase),
+        pending: None,
+    })
+}
+
+/// Data line number `count` (0-based) of a beam section: dimensions, then the first section
+/// axis, then (`*BEAM GENERAL SECTION` only) the moduli `E, G`.
+fn beam_section_line(
+    line: usize,
+    fields: &[String],
+    s: &mut BeamSection,
+    count: usize,
+) -> Result<(), GateError> {
+    let vals = fields
+        .iter()
+        .filter(|f| !f.is_empty())
+        .map(|f| number(f, line, "beam section data"))
+        .collect::<Result<Vec<_>, _>>()?;
+    match count {
+        0 => s.data = vals,
+        1 if vals.len() == 3 => s.direction = Some([vals[0], vals[1], vals[2]]),
+        1 => return Err(err(line, "beam section direction needs 3 components")),
+        2 if s.general_keyword && vals.len() >= 2 => {
+            s.moduli = Some([vals[0], vals[1]]);
+        }
+        2 if s.general_keyword => {
+            return Err(err(line, "*BEAM GENERAL SECTION moduli line needs E, G"));
+        }
+        _ if s.general_keyword => {
+            return Err(err(
+                line,
+                "*BEAM GENERAL SECTION takes at most 3 data lines here",
+            ));
+        }
+        _ => return Err(err(line, "*BEAM SECTION takes at most 2 data lines")),
+    }
+    Ok(())
+}
+
+/// The data line of a `*TRANSFORM`: points `a` and `b`.
+fn transform_line(line: usize, fields: &[String], t: &mut Transform) -> Result<(), GateError> {
+    if !t.a[0].is_nan() {
+        return Err(err(line, "*TRANSFORM takes one data line"));
+    }
+    if fields.len() < 6 {
+        return Err(err(line, "*TRANSFORM needs 6 numbers (a, b)"));
+    }
+    for k in 0..3 {
+        t.a[k] = number(&fields[k], line, "transform point a")?;
+        t.b[k] = number(&fields[k + 3], line, "transform point b")?;
+    }
+    Ok(())
+}
+
+/// A `*CLOAD` line: node or node set, DOF, magnitude.
+fn cload_line(line: usize, fields: &[String]) -> Result<Cload, GateError> {
+    let target = node_ref(field(fields, 0, line, "node or node set")?);
+    Ok(Cload {
+        target,
+        dof: dof(field(fields, 1, line, "degree of freedom")?, line)?,
+        value: number(field(fields, 2, line, "load value")?, line, "load value")?,
+        line,
+    })
 }
 
 fn boundary_line(line: usize, fields: &[String]) -> Result<Boundary, GateError> {

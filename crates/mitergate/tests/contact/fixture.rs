@@ -19,8 +19,8 @@
 //! To run the tests on the real gate, make [`gate`] return
 //! `mitergate::GateModel::build(&mitergate::GateConfig::default())?.condense(509)?`.
 
-use mitergate::condensed::{CondensedGate, HydrostaticTable};
-use mitergate::contact::linear_load_transfer;
+use mitergate::condense::{CondensedGate, HydrostaticTable};
+use mitergate::fe::loads::linear_load_transfer;
 use nalgebra::{DMatrix, DVector};
 
 /// Quoin height (in).

@@ -1,14 +1,10 @@
-//! Tests of the quoin contact model, the synthetic truth and the `mlmodel` adapters.
-//!
-//! They run on the analytical beam gate of [`fixture`]; switch `fixture::gate` to the FE gate
-//! once it exists.
+//! Tests of the quoin contact model. They (and those of `data` and `multilevel`) run on the
+//! analytical beam gate of [`fixture`], shared through [`model`].
 
 pub mod fixture;
-mod gate_model;
 mod physics;
 mod solver;
 mod strategies;
-mod truth;
 
 use mitergate::contact::{ContactModel, ContactParams};
 use std::sync::OnceLock;

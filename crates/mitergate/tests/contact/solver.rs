@@ -173,8 +173,8 @@ fn model_round_trips_through_serde() {
 fn model_is_send_and_sync() {
     fn assert_send_sync<T: Send + Sync>() {}
     assert_send_sync::<ContactModel>();
-    assert_send_sync::<mitergate::gate_model::ContactForceModel>();
-    assert_send_sync::<mitergate::gate_model::StrainModel>();
+    assert_send_sync::<mitergate::multilevel::ContactForceModel>();
+    assert_send_sync::<mitergate::multilevel::StrainModel>();
 }
 
 #[test]
@@ -353,10 +353,7 @@ fn warm_start_rejects_a_solution_of_another_size() {
 fn hard_inputs_on_the_real_gate_converge() {
     let mut cfg = mitergate::GateConfig::default();
     cfg.mesh.element_size = 24.0;
-    let gate = mitergate::GateModel::build(&cfg)
-        .and_then(|m| m.condense(mitergate::DEFAULT_NU))
-        .unwrap();
-    let m = ContactParams::default().build(gate).unwrap();
+    let (m, _) = mitergate::build_contact(&cfg).unwrap();
     for (x, theta) in [
         ([550.0, 318.0], 164.0),
         ([542.3278, 185.0065], 119.4739918176505),

@@ -14,10 +14,7 @@ fn data() -> (DMatrix<f64>, DMatrix<f64>) {
 fn nan_input_is_reported_with_position() {
     let (mut x, y) = data();
     x[(7, 2)] = f64::NAN;
-    let err = LstmParams::new(4, 1)
-        .progress(false)
-        .fit(&x, &y)
-        .unwrap_err();
+    let err = LstmParams::new(4, 1).fit(&x, &y).unwrap_err();
     assert!(
         matches!(
             err,
@@ -32,10 +29,7 @@ fn nan_input_is_reported_with_position() {
     );
     let (x, mut y) = data();
     y[(3, 0)] = f64::INFINITY;
-    let err = LstmParams::new(4, 1)
-        .progress(false)
-        .fit(&x, &y)
-        .unwrap_err();
+    let err = LstmParams::new(4, 1).fit(&x, &y).unwrap_err();
     assert!(
         matches!(
             err,
@@ -114,7 +108,6 @@ fn divergence_is_an_error_with_epoch_and_batch() {
         .learning_rate(1e30)
         .epochs(50)
         .batch_size(8)
-        .progress(false)
         .fit(&x, &y)
         .unwrap_err();
     assert!(matches!(err, SeqError::Diverged { .. }), "{err}");
@@ -127,7 +120,6 @@ fn predict_rejects_nan() {
     let m = LstmParams::new(4, 1)
         .hidden(3)
         .epochs(1)
-        .progress(false)
         .fit(&x, &y)
         .unwrap();
     let mut bad = x.clone();

@@ -48,7 +48,6 @@ fn fits_a_nonlinear_multi_output_map() {
             .learning_rate(1e-2)
             .schedule(LrSchedule::Cosine { min_factor: 0.05 })
             .precision(precision)
-            .progress(false)
             .fit(&x, &y)
             .unwrap();
         let err = relative_mse(&m.predict(&x_test).unwrap(), &y_test);
@@ -71,7 +70,6 @@ fn remembers_the_first_step_of_a_sequence() {
         .batch_size(64)
         .learning_rate(1e-2)
         .clip_norm(1.0)
-        .progress(false)
         .fit(&x, &first(&x))
         .unwrap();
     let err = relative_mse(&m.predict(&x_test).unwrap(), &first(&x_test));
@@ -92,7 +90,6 @@ fn learns_a_running_sum_with_two_layers_and_sgd() {
         .learning_rate(0.05)
         .optimizer(Optimizer::sgd(0.9))
         .clip_norm(1.0)
-        .progress(false)
         .fit(&x, &sum(&x))
         .unwrap();
     let err = relative_mse(&m.predict(&x_test).unwrap(), &sum(&x_test));
@@ -111,7 +108,6 @@ fn early_stopping_restores_the_best_epoch() {
         .learning_rate(3e-2)
         .patience(3)
         .validation_fraction(0.3)
-        .progress(false)
         .fit(&x, &y)
         .unwrap();
     let h = m.history();
@@ -136,10 +132,7 @@ fn search_picks_a_candidate_and_is_deterministic() {
         max_epochs: 15,
         test_fraction: 0.25,
     };
-    let base = LstmParams::new(3, 3)
-        .batch_size(32)
-        .learning_rate(1e-2)
-        .progress(false);
+    let base = LstmParams::new(3, 3).batch_size(32).learning_rate(1e-2);
     let a = select_hyperparameters(&base, &space, &x, &y).unwrap();
     let b = select_hyperparameters(&base, &space, &x, &y).unwrap();
     assert_eq!(a.table.len(), 3); // budget honoured: (1,2), (1,16), (2,2)
@@ -152,7 +145,10 @@ fn search_picks_a_candidate_and_is_deterministic() {
         .iter()
         .min_by(|p, q| p.test_score.total_cmp(&q.test_score))
         .unwrap();
-    assert_eq!(a.best.get_architecture(), (best.hidden, best.layers));
+    assert_eq!(
+        (a.best.settings().hidden, a.best.settings().layers),
+        (best.hidden, best.layers)
+    );
     // Two hidden units cannot represent three nonlinear outputs as well as sixteen.
-    assert_eq!(a.best.get_architecture().0, 16);
+    assert_eq!(a.best.settings().hidden, 16);
 }

@@ -51,8 +51,7 @@ fn fit_is_deterministic_for_a_seed_and_thread_count() {
             .steps(2)
             .epochs(3)
             .batch_size(32)
-            .threads(threads)
-            .progress(false);
+            .threads(threads);
         let a = p.clone().fit(&x, &y).unwrap();
         let b = p.clone().fit(&x, &y).unwrap();
         assert_eq!(a.predict(&x).unwrap(), b.predict(&x).unwrap());
@@ -71,7 +70,6 @@ fn save_load_round_trip_predicts_identically() {
             .epochs(2)
             .batch_size(16)
             .precision(precision)
-            .progress(false)
             .fit(&x, &y)
             .unwrap();
         let path = tmp(&format!("{precision:?}"));
@@ -90,7 +88,6 @@ fn load_rejects_other_version_and_shape() {
         .hidden(3)
         .epochs(1)
         .batch_size(16)
-        .progress(false)
         .fit(&x, &y)
         .unwrap();
     let path = tmp("version");

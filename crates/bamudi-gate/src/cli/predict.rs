@@ -1,0 +1,131 @@
+//! `bamudi predict`: Module 4 from a saved calibration.
+use anyhow::{Context, Result};
+use bamudi::{Band, Calibration};
+use bamudi_gate::gate::SavedModel;
+use mlmodel::{ObservableModel, UnobservableModel};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// Arguments of `predict`.
+#[derive(Debug, clap::Args)]
+pub struct PredictArgs {
+    /// `calibration.json` written by `calibrate`.
+    #[arg(long)]
+    pub calibration: PathBuf,
+    /// `model.json` written by `calibrate` (default: beside the calibration file).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Upstream water level above the sill (in).
+    #[arg(long)]
+    pub h_up: f64,
+    /// Downstream water level above the sill (in).
+    #[arg(long)]
+    pub h_down: f64,
+    /// CSV of the predicted quoin forces (default: `forces_<h_up>_<h_down>.csv` beside the
+    /// calibration file).
+    #[arg(long)]
+    pub forces_out: Option<PathBuf>,
+}
+
+/// Runs `predict`.
+pub fn run(a: &PredictArgs) -> Result<()> {
+    for (name, v) in [("--h-up", a.h_up), ("--h-down", a.h_down)] {
+        anyhow::ensure!(
+            v.is_finite(),
+            "{name} must be a finite level in inches, got {v}"
+        );
+    }
+    let cal = Calibration::load(&a.calibration)?;
+    let dir = a
+        .calibration
+        .parent()
+        .map(PathBuf::from)
+        .unwrap_or_default();
+    let model_path = a.model.clone().unwrap_or_else(|| dir.join("model.json"));
+    let saved = SavedModel::load(&model_path).with_context(|| {
+        format!(
+            "the model file written by `calibrate` (give it with --model if it is not beside {})",
+            a.calibration.display()
+        )
+    })?;
+    let model = saved.multilevel(0)?;
+    let predictor = cal
+        .predictor(&model)
+        .with_context(|| format!("{} and {}", a.calibration.display(), model_path.display()))?;
+    let x = [a.h_up, a.h_down];
+    let strains = predictor.outputs(&x).with_context(|| {
+        format!(
+            "predicting strains at h_up = {} in, h_down = {} in",
+            a.h_up, a.h_down
+        )
+    })?;
+    let forces = predictor
+        .response(&x)
+        .context("predicting the quoin forces")?;
+    print_strains(
+        a,
+        &model.observable.output_names(),
+        &strains,
+        cal.sigma_eps(),
+    );
+    let out = a
+        .forces_out
+        .clone()
+        .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", a.h_up, a.h_down)));
+    let z = model.unobservable.coordinates();
+    bamudi::data::write_atomic(&out, forces_csv(z, &forces).as_bytes())?;
+    println!(
+        "quoin forces (95 % bands, {} points along the quoin) written to {}",
+        z.len(),
+        out.display()
+    );
+    Ok(())
+}
+
+/// The strain table: mean, model band and measurement band (adds `σ_ε`) per gauge.
+fn print_strains(a: &PredictArgs, names: &[String], strains: &Band, sigma_eps: f64) {
+    println!(
+        "strains at h_up = {} in, h_down = {} in (microstrain; model band = noise-free strain, \
+         measurement band adds sigma_eps = {sigma_eps:.3}):",
+        a.h_up, a.h_down
+    );
+    println!(
+        "{:>8} {:>12} {:>12} {:>12} {:>14} {:>14}",
+        "gauge", "mean", "2.5%", "97.5%", "meas. 2.5%", "meas. 97.5%"
+    );
+    for (p, name) in names.iter().enumerate() {
+        let half = 1.959_964 * (strains.sd[p].powi(2) + sigma_eps.powi(2)).sqrt();
+        println!(
+            "{:>8} {:>12.3} {:>12.3} {:>12.3} {:>14.3} {:>14.3}",
+            name,
+            strains.mean[p],
+            strains.lower[p],
+            strains.upper[p],
+            strains.mean[p] - half,
+            strains.mean[p] + half
+        );
+    }
+}
+
+/// The quoin forces (lbf/in) with their bands, one row per point along the quoin (in).
+fn forces_csv(z: &[f64], forces: &Band) -> String {
+    let n = z.len();
+    let mut csv = String::from(
+        "z_in,normal_mean_lbf_per_in,normal_lower_lbf_per_in,normal_upper_lbf_per_in,\
+         tangential_mean_lbf_per_in,tangential_lower_lbf_per_in,tangential_upper_lbf_per_in\n",
+    );
+    for b in 0..n {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{}",
+            z[b],
+            forces.mean[b],
+            forces.lower[b],
+            forces.upper[b],
+            forces.mean[n + b],
+            forces.lower[n + b],
+            forces.upper[n + b]
+        );
+    }
+    csv
+}

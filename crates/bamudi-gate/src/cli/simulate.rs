@@ -1,0 +1,143 @@
+//! `bamudi simulate experiments|field`.
+use super::{GateArgs, build_contact, gate_config};
+use anyhow::{Context, Result};
+use bamudi::Experiments;
+use mitergate::data::field::{FieldConfig, FieldEffects, MissingValues};
+use mitergate::data::truth::{self, Scenario};
+use nalgebra::DMatrix;
+use std::path::{Path, PathBuf};
+
+/// What to simulate.
+#[derive(Debug, clap::Subcommand)]
+pub enum SimulateCmd {
+    /// The paper's synthetic experiments (Sec. 4.3, Eq. 48, 53-54): strains of the true forces
+    /// `ρ g_BC(x, θ*) + δ(x)` plus Gaussian noise at random water levels.
+    Experiments(ExperimentsArgs),
+    /// A field record: months of lockages with the gate model as the true strain function and
+    /// optional effects the calibration model lacks.
+    Field(FieldArgs),
+}
+
+/// Arguments of `simulate experiments`.
+#[derive(Debug, clap::Args)]
+pub struct ExperimentsArgs {
+    /// Paper scenario: 1 (θ* = 90 in, prior U(81, 105)) or 2 (θ* = 150 in, prior U(135, 165)).
+    #[arg(long)]
+    pub scenario: u8,
+    /// Number of experiments.
+    #[arg(long, default_value_t = 500)]
+    pub n: usize,
+    /// Noise standard deviation (microstrain).
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_sd: f64,
+    /// Output CSV (`h_up`, `h_down` in inches, one column per gauge in microstrain).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Arguments of `simulate field`.
+#[derive(Debug, clap::Args)]
+pub struct FieldArgs {
+    /// Record length (days).
+    #[arg(long, default_value_t = 60.0)]
+    pub days: f64,
+    /// Sampling interval (minutes).
+    #[arg(long, default_value_t = 60.0)]
+    pub step_minutes: f64,
+    /// Effects to switch on (repeat or comma-separate): thermal, drift, offset-jump,
+    /// gap-growth, hysteresis, wall-flexure, none.
+    #[arg(long, value_delimiter = ',', default_value = "none")]
+    pub effect: Vec<String>,
+    /// True bottom gap length (in) at the start of the record.
+    #[arg(long, default_value_t = 90.0)]
+    pub gap: f64,
+    /// Gap at the end of the record (in) for the `gap-growth` effect.
+    #[arg(long, default_value_t = 130.0)]
+    pub final_gap: f64,
+    /// White gauge noise (microstrain).
+    #[arg(long, default_value_t = 1.0)]
+    pub noise_sd: f64,
+    /// Probability that a gauge value is missing (telemetry drop-out).
+    #[arg(long)]
+    pub missing: Option<f64>,
+    /// Output CSV (see docs/closeloop.md for the columns).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Runs `simulate`.
+pub fn run(cmd: &SimulateCmd, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
+    match cmd {
+        SimulateCmd::Experiments(a) => experiments(a, gate, seed),
+        SimulateCmd::Field(a) => field(a, gate, seed),
+    }
+}
+
+fn experiments(a: &ExperimentsArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
+    let mut sc = Scenario::paper(a.scenario)
+        .context("--scenario")?
+        .n_experiments(a.n)
+        .noise_sd(a.noise_sd);
+    if let Some(s) = seed {
+        sc = sc.seed(s);
+    }
+    sc.validate().context("invalid --n or --noise-sd")?;
+    let contact = build_contact(&gate_config(gate)?)?;
+    let e = truth::generate(&sc, &contact).context("generating the experiments")?;
+    let names = contact.gate().gauge_names.clone();
+    let x = DMatrix::from_fn(e.x.len(), 2, |i, j| e.x[i][j]);
+    let y = DMatrix::from_fn(e.x.len(), names.len(), |i, j| e.strains[i][j]);
+    let exps = Experiments::new(vec!["h_up".into(), "h_down".into()], names, x, y)?;
+    ensure_parent(&a.out)?;
+    exps.write_csv(&a.out)?;
+    eprintln!(
+        "wrote {} experiments of {} (true gap {} in, prior U({}, {}) in, seed {}) to {}",
+        exps.len(),
+        sc.name,
+        sc.theta_true,
+        sc.prior.0,
+        sc.prior.1,
+        sc.seed,
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
+    let mut effects = FieldEffects::default();
+    for name in &a.effect {
+        effects = effects
+            .with_preset(name.trim(), a.final_gap)
+            .context("--effect")?;
+    }
+    if let Some(p) = a.missing {
+        effects.missing = Some(MissingValues { probability: p });
+    }
+    let cfg = FieldConfig::default()
+        .seed(seed.unwrap_or(0))
+        .duration(a.days, a.step_minutes)
+        .noise_sd(a.noise_sd)
+        .gap(a.gap)
+        .effects(effects);
+    let contact = build_contact(&gate_config(gate)?)?;
+    let rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;
+    ensure_parent(&a.out)?;
+    rec.write_csv(&a.out)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    eprintln!(
+        "wrote {} rows ({} days every {} min, effects: {}) to {}",
+        rec.len(),
+        a.days,
+        a.step_minutes,
+        a.effect.join(", "),
+        a.out.display()
+    );
+    Ok(())
+}
+
+fn ensure_parent(path: &Path) -> Result<()> {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => super::create_dir(p),
+        _ => Ok(()),
+    }
+}

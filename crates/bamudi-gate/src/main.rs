@@ -1,0 +1,68 @@
+//! The `bamudi` command-line interface on the miter gate (see `docs/cli.md`):
+//!
+//! * `simulate experiments` — the paper's synthetic experiments (Sec. 4.3, scenario 1 or 2);
+//! * `simulate field` — a months-long field record (pools, lockages, temperatures, effects);
+//! * `calibrate` — BA-MUDI Modules 2-3 from a TOML configuration and a CSV of experiments;
+//! * `predict` — Module 4 (strains with 95 % bands, quoin forces CSV) from a saved calibration;
+//! * `close-loop` — find the effects a calibration misses in a field record.
+//!
+//! Every command works on the embedded default gate unless `--gate gate.toml` is given.
+mod cli;
+
+use anyhow::{Context, Result};
+use bamudi_gate::progress;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "bamudi",
+    version,
+    about = "BA-MUDI: Bayesian calibration of multi-level models with unobservable distributed response, on a miter gate"
+)]
+struct Cli {
+    /// Master seed (overrides the config's `seed`; default 2021 for calibration, the scenario
+    /// number for `simulate experiments`, 0 for `simulate field`).
+    #[arg(long, global = true)]
+    seed: Option<u64>,
+    /// Worker threads of the rayon pool (default: one per core).
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+    /// Print the engine's diagnostics (log level `info`; `RUST_LOG` sets any level).
+    #[arg(long, short, global = true)]
+    verbose: bool,
+    #[command(flatten)]
+    gate: cli::GateArgs,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Generate synthetic data from the gate model.
+    #[command(subcommand)]
+    Simulate(cli::simulate::SimulateCmd),
+    /// Calibrate: TOML configuration + CSV experiments -> results directory.
+    Calibrate(cli::calibrate::CalibrateArgs),
+    /// Predict strains (95 % bands) and quoin forces from a saved calibration (Module 4).
+    Predict(cli::predict::PredictArgs),
+    /// Close the loop on a field record: find, add and report the missing effects.
+    CloseLoop(cli::closeloop::CloseLoopCmd),
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    progress::init_logging(cli.verbose);
+    if let Some(t) = cli.threads {
+        anyhow::ensure!(t >= 1, "--threads must be at least 1, got {t}");
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build_global()
+            .context("--threads: building the rayon pool")?;
+    }
+    match &cli.cmd {
+        Cmd::Simulate(c) => cli::simulate::run(c, &cli.gate, cli.seed),
+        Cmd::Calibrate(a) => cli::calibrate::run(a, &cli.gate, cli.seed),
+        Cmd::Predict(a) => cli::predict::run(a),
+        Cmd::CloseLoop(a) => cli::closeloop::run(a, &cli.gate, cli.seed),
+    }
+}

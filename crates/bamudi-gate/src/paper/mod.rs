@@ -1,0 +1,470 @@
+//! Reproduction of the paper's miter-gate case study (Sec. 4.3, Table 1, Fig. 13-22): the job
+//! behind `cargo xtask reproduce-paper`.
+//!
+//! For each scenario of Table 1 (θ* = 90 in with prior U(81, 105); θ* = 150 in with prior
+//! U(135, 165)):
+//!
+//! 1. **Module 1**: the default gate ([`mitergate::GateConfig::default`]) is built and condensed
+//!    once ([`mitergate::build_contact`], `N_u` = 509), with its quoin contact model; the
+//!    multi-level model of each scenario comes from [`mitergate::multilevel`].
+//! 2. **Synthetic truth** ([`mitergate::truth`]): `N_e` = 500 experiments with
+//!    ρ = 0.8, the discrepancy of Eq. 53-54 and σ = 1 microstrain noise.
+//! 3. **Modules 2-4** ([`bamudi::calibrate()`]), blind to ρ, θ* and δ.
+//! 4. **Scoring against the truth** (only here, never inside the calibration): force RMSE over
+//!    50 new water-level pairs and all 509 quoin points before calibration (the prior-averaged
+//!    model, Eq. 2) and after (Module 4, Eq. 52), and the strain RMSE at the same 50 conditions
+//!    with and without the discrepancy model.
+//!
+//! The sampling rule of Module 2 is [`SamplingRule::default`], fixed from the model alone; the
+//! optional sensitivity study re-runs Modules 2-3 with the exact linear estimator for a few
+//! other rules and reports how ρ* and the θ posterior move.
+
+mod markdown;
+mod score;
+mod sensitivity;
+
+pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rules};
+
+use crate::error::Result;
+use bamudi::closeloop::ThetaSummary;
+use bamudi::{
+    Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode, EstimatorParams,
+    Experiments, SamplingRule,
+};
+use mitergate::data::truth::{self, Scenario};
+use mitergate::{ContactModel, GateConfig, GateMultiLevel, MultiLevelSpec};
+use nalgebra::{DMatrix, DVector};
+use score::{Scores, rms, score};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Options of the reproduction. [`ReproduceOptions::paper`] is the paper's size,
+/// [`ReproduceOptions::quick`] a CI-sized run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ReproduceOptions {
+    /// Number of experiments per scenario (paper: 500).
+    pub n_experiments: usize,
+    /// Module 2 training-set size (paper: 50,000).
+    pub training_size: usize,
+    /// The coefficient estimator of Eq. 29 (paper: LSTM).
+    pub estimator: EstimatorParams,
+    /// θ grid points for Module 3.
+    pub theta_grid_points: usize,
+    /// New water-level pairs for the prediction scores (paper: 50).
+    pub new_conditions: usize,
+    /// Target element size of the gate mesh (in); `None` keeps the default gate's.
+    pub mesh_element_size: Option<f64>,
+    /// Run the sampling-rule sensitivity study.
+    pub sensitivity: bool,
+    /// Gauge noise standard deviation (microstrain) from the sensor specification, added to the
+    /// Module-2 training outputs so the estimator learns `E[α | ρ, x, y]` for noisy `y`. It is a
+    /// property of the gauges (the paper states σ = 1 µε), not of the unknown truth; without it
+    /// 12 coefficients reproduce any 7 noise-free strains exactly and Eq. 30 is flat in ρ.
+    pub gauge_noise_sd: f64,
+    /// Also run the conditional-coefficient variant ([`CoefficientMode::ConditionalOnTheta`]).
+    #[serde(default)]
+    pub conditional: bool,
+    /// Master seed.
+    pub seed: u64,
+    /// Progress bars.
+    pub progress: bool,
+}
+
+impl ReproduceOptions {
+    /// The paper's sizes: 500 experiments, 50,000 training samples, the LSTM estimator.
+    ///
+    /// ```
+    /// let o = bamudi_gate::paper::ReproduceOptions::paper();
+    /// assert_eq!((o.n_experiments, o.training_size), (500, 50_000));
+    /// ```
+    pub fn paper() -> Self {
+        Self {
+            n_experiments: 500,
+            training_size: 50_000,
+            // The paper's LSTM (hidden 64, one layer, 10 scalar steps) with a budget of 60 epochs
+            // and early stopping (patience 10) on a 10% validation split.
+            estimator: EstimatorParams::Lstm(bamudi_lstm_paper()),
+            theta_grid_points: 121,
+            new_conditions: 50,
+            mesh_element_size: None,
+            sensitivity: true,
+            gauge_noise_sd: 1.0,
+            conditional: true,
+            seed: 2021,
+            progress: true,
+        }
+    }
+
+    /// A CI-sized run: a coarser mesh, 120 experiments and the exact linear estimator (no
+    /// training set), so the whole chain runs in the test profile in well under a minute.
+    ///
+    /// ```
+    /// let o = bamudi_gate::paper::ReproduceOptions::quick();
+    /// assert!(o.n_experiments < 500);
+    /// ```
+    pub fn quick() -> Self {
+        Self {
+            n_experiments: 120,
+            training_size: 4_000,
+            estimator: EstimatorParams::ExactLinear,
+            theta_grid_points: 49,
+            new_conditions: 20,
+            mesh_element_size: Some(24.0),
+            sensitivity: false,
+            gauge_noise_sd: 1.0,
+            conditional: true,
+            seed: 2021,
+            progress: false,
+        }
+    }
+}
+
+/// Force RMSE (lbf/in) over the new conditions and all quoin points.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ForceRmse {
+    /// Normal force, prior-averaged model (ρ = 1, no discrepancy, Eq. 2).
+    pub normal_before: f64,
+    /// Normal force, Module 4 posterior mean (Eq. 52).
+    pub normal_after: f64,
+    /// Tangential force before.
+    pub tangential_before: f64,
+    /// Tangential force after.
+    pub tangential_after: f64,
+}
+
+/// Strain prediction RMSE (microstrain) at the new conditions, against noise-free truth.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StrainRmse {
+    /// BA-MUDI prediction (Module 4 with the discrepancy model).
+    pub with_discrepancy: f64,
+    /// Prediction of the calibration without discrepancy (ρ = 1, δ = 0, its own θ posterior).
+    pub without_discrepancy: f64,
+}
+
+/// Wall-clock seconds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ScenarioTimings {
+    /// Module 2: training set, estimator, ρ*, GPs.
+    pub module2: f64,
+    /// Module 3: covariance factorisation and θ posteriors.
+    pub module3: f64,
+    /// Whole scenario including truth generation and Module 4 scoring (not Module 1).
+    pub total: f64,
+}
+
+/// One row of the sampling-rule sensitivity study.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SensitivityRow {
+    /// Human-readable description of the rule.
+    pub rule: String,
+    /// ρ range of the training distribution.
+    pub rho_range: [f64; 2],
+    /// α range multiplier `c`.
+    pub alpha_scale: f64,
+    /// ρ*.
+    pub rho_star: f64,
+    /// θ posterior with discrepancy.
+    pub theta: ThetaSummary,
+}
+
+/// The same scenario re-run with [`CoefficientMode::ConditionalOnTheta`] (not in the paper),
+/// reusing the fitted estimator of the main run.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ConditionalResult {
+    /// ρ* of the profile search.
+    pub rho_star: f64,
+    /// θ posterior with the discrepancy model.
+    pub theta_posterior: ThetaSummary,
+    /// Force RMSE before/after.
+    pub force_rmse: ForceRmse,
+    /// Strain RMSE (the without-discrepancy column repeats the main run's).
+    pub strain_rmse: StrainRmse,
+    /// σ_ε used in Module 3 (estimated).
+    pub sigma_eps: f64,
+    /// Seconds for the re-run of Modules 2b-3 (profile search, GP refit, posterior).
+    pub seconds: f64,
+}
+
+/// Everything reported for one scenario (the `--json` schema of the README).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ScenarioResult {
+    /// "scenario 1" / "scenario 2".
+    pub name: String,
+    /// θ* (in).
+    pub theta_true: f64,
+    /// The paper's ρ* for this scenario.
+    pub rho_star_paper: f64,
+    /// Our ρ*.
+    pub rho_star: f64,
+    /// θ posterior with the discrepancy model.
+    pub theta_posterior: ThetaSummary,
+    /// θ posterior without it.
+    pub theta_posterior_no_discrepancy: ThetaSummary,
+    /// Force RMSE before/after.
+    pub force_rmse: ForceRmse,
+    /// Strain RMSE with/without discrepancy.
+    pub strain_rmse: StrainRmse,
+    /// RMS over experiments and gauges of the discrepancy's strain `A δ` (microstrain), to set
+    /// against σ = 1.
+    pub discrepancy_strain_rms: f64,
+    /// σ_ε used in Module 3 (estimated).
+    pub sigma_eps: f64,
+    /// Timings.
+    pub timings_s: ScenarioTimings,
+    /// Sampling-rule sensitivity (empty when not run).
+    pub sensitivity: Vec<SensitivityRow>,
+    /// The conditional-coefficient variant (absent when not run).
+    #[serde(default)]
+    pub conditional: Option<ConditionalResult>,
+}
+
+/// Module-1 facts about the gate.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GateSummary {
+    /// Degrees of freedom of the FE model.
+    pub n_dofs: usize,
+    /// FE quoin nodes.
+    pub n_quoin_nodes: usize,
+    /// Build + factor + condense (s).
+    pub module1_s: f64,
+    /// Target element size (in).
+    pub element_size: f64,
+}
+
+/// The whole reproduction.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ReproduceReport {
+    /// Options used.
+    pub options: ReproduceOptions,
+    /// The gate.
+    pub gate: GateSummary,
+    /// Both scenarios.
+    pub scenarios: Vec<ScenarioResult>,
+    /// Total wall time (s).
+    pub total_s: f64,
+}
+
+/// The paper's LSTM (hidden 64, one layer, 10 scalar steps) with a budget of 60 epochs and
+/// early stopping (patience 10) on a 10 % validation split.
+fn bamudi_lstm_paper() -> bamudi::module2::estimator::LstmSettings {
+    bamudi::module2::estimator::LstmSettings {
+        hidden: 64,
+        layers: 1,
+        steps: 10,
+        epochs: 60,
+        batch_size: 256,
+        learning_rate: 1e-3,
+        validation_fraction: 0.1,
+        patience: 10,
+        ..Default::default()
+    }
+}
+
+/// Builds the default gate (Module 1, timed) with the given element size.
+pub fn build_gate(element_size: Option<f64>) -> Result<(ContactModel, GateSummary)> {
+    let mut cfg = GateConfig::default();
+    if let Some(h) = element_size {
+        cfg.mesh.element_size = h;
+    }
+    let (contact, s, seconds) = crate::gate::build(&cfg)?;
+    let summary = GateSummary {
+        n_dofs: s.n_dofs,
+        n_quoin_nodes: s.n_quoin_nodes,
+        module1_s: seconds,
+        element_size: s.element_size,
+    };
+    Ok((contact, summary))
+}
+
+/// The gate as a multi-level model with prior `U(lo, hi)` and 6 + 6 Legendre terms (no memo:
+/// every contact solve of the reproduction is at a distinct input).
+pub fn gate_model(contact: &ContactModel, prior: (f64, f64)) -> Result<GateMultiLevel> {
+    let spec = MultiLevelSpec {
+        gap_prior_in: prior,
+        discrepancy_terms: [6, 6],
+        memo_capacity: 0,
+    };
+    Ok(mitergate::multilevel(contact.clone(), &spec)?)
+}
+
+fn to_experiments(exps: &truth::Experiments, n_gauges: usize) -> Result<Experiments> {
+    let n = exps.x.len();
+    let x = DMatrix::from_fn(n, 2, |i, j| exps.x[i][j]);
+    let y = DMatrix::from_fn(n, n_gauges, |i, j| exps.strains[i][j]);
+    Ok(Experiments::new(
+        vec!["h_up".into(), "h_down".into()],
+        (1..=n_gauges).map(|g| format!("g{g}")).collect(),
+        x,
+        y,
+    )?)
+}
+
+/// The reproduction's calibration settings with the given sampling rule.
+fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> CalibrationParams {
+    CalibrationParams::default()
+        .estimator(opts.estimator.clone())
+        .training_size(opts.training_size)
+        .theta_grid_points(opts.theta_grid_points)
+        .sampling(sampling.noise_sd(opts.gauge_noise_sd))
+        .seed(opts.seed)
+}
+
+/// Re-runs Modules 2b-3 of a finished calibration with the conditional coefficient mode
+/// (same fitted estimator, same data) and scores it like the main run.
+fn run_conditional(
+    s: &ScenarioRun<'_>,
+    cal: &Calibration,
+    main_scores: &Scores,
+    observer: &dyn bamudi::observe::Observer,
+) -> Result<ConditionalResult> {
+    let t = Instant::now();
+    let cfg: CalibrationConfig = cal
+        .config()
+        .clone()
+        .into_params()
+        .coefficients(CoefficientMode::ConditionalOnTheta)
+        .check()?;
+    let m2 = cal.module2();
+    let cond = Calibrate::new(&cfg).observer(observer).run_with_estimator(
+        &s.model,
+        &s.exps,
+        m2.estimator.clone(),
+        m2.training_pool_size,
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let scores = score(&s.model, &cond, &s.scenario, s.contact, &s.new_x)?;
+    Ok(ConditionalResult {
+        rho_star: cond.rho_star(),
+        theta_posterior: cond.module3().posterior.summary(0),
+        force_rmse: scores.force,
+        strain_rmse: StrainRmse {
+            with_discrepancy: scores.strain.with_discrepancy,
+            without_discrepancy: main_scores.strain.without_discrepancy,
+        },
+        sigma_eps: cond.sigma_eps(),
+        seconds,
+    })
+}
+
+/// One scenario's fixed inputs: the gate, the synthetic truth, the model and the new
+/// conditions of the scores.
+struct ScenarioRun<'a> {
+    contact: &'a ContactModel,
+    scenario: Scenario,
+    truth: truth::Experiments,
+    exps: Experiments,
+    model: GateMultiLevel,
+    new_x: Vec<[f64; 2]>,
+}
+
+impl<'a> ScenarioRun<'a> {
+    fn new(contact: &'a ContactModel, number: u8, opts: &ReproduceOptions) -> Result<Self> {
+        let scenario = Scenario::paper(number)?
+            .n_experiments(opts.n_experiments)
+            .seed(opts.seed.wrapping_add(number as u64));
+        let truth = truth::generate(&scenario, contact)?;
+        let exps = to_experiments(&truth, contact.gate().n_gauges())?;
+        let model = gate_model(contact, scenario.prior)?;
+        let new_x = truth::sample_levels(
+            opts.new_conditions,
+            opts.seed.wrapping_add(100 + number as u64),
+        );
+        Ok(Self {
+            contact,
+            scenario,
+            truth,
+            exps,
+            model,
+            new_x,
+        })
+    }
+
+    /// RMS over experiments and gauges of the true discrepancy's strain `A δ`.
+    fn discrepancy_strain_rms(&self) -> f64 {
+        let no_delta = self.scenario.clone().discrepancy_scale(0.0);
+        let gate = self.contact.gate();
+        rms(self
+            .truth
+            .x
+            .iter()
+            .zip(&self.truth.noise_free_strains)
+            .flat_map(|(x, s)| {
+                let without = truth::true_forces(&no_delta, self.contact, *x)
+                    .map(|f| gate.strain(&f, x[0], x[1]))
+                    .unwrap_or_else(|_| DVector::from_element(s.len(), f64::NAN));
+                s.iter()
+                    .zip(without.iter())
+                    .map(|(a, b)| a - b)
+                    .collect::<Vec<_>>()
+            }))
+    }
+}
+
+/// Runs one scenario (1 or 2) on a built gate, reporting progress to `observer`; returns the
+/// scored result, the calibration and the model.
+pub fn run_scenario(
+    contact: &ContactModel,
+    number: u8,
+    opts: &ReproduceOptions,
+    observer: &dyn bamudi::observe::Observer,
+) -> Result<(ScenarioResult, Calibration, GateMultiLevel)> {
+    let t_total = Instant::now();
+    let s = ScenarioRun::new(contact, number, opts)?;
+    let cfg = calibration_params(opts, SamplingRule::default()).check()?;
+    let cal = Calibrate::new(&cfg)
+        .observer(observer)
+        .run(&s.model, &s.exps)?;
+    let scores = score(&s.model, &cal, &s.scenario, contact, &s.new_x)?;
+    let conditional = match opts.conditional {
+        true => Some(run_conditional(&s, &cal, &scores, observer)?),
+        false => None,
+    };
+    let sens = match opts.sensitivity {
+        true => sensitivity::study(contact, s.scenario.prior, &s.exps, opts)?,
+        false => Vec::new(),
+    };
+    let (m3, tm) = (cal.module3(), cal.timings());
+    let result = ScenarioResult {
+        name: format!("scenario {number}"),
+        theta_true: s.scenario.theta_true,
+        rho_star_paper: if number == 1 { 0.74 } else { 0.83 },
+        rho_star: cal.rho_star(),
+        theta_posterior: m3.posterior.summary(0),
+        theta_posterior_no_discrepancy: m3.posterior_no_discrepancy.summary(0),
+        force_rmse: scores.force,
+        strain_rmse: scores.strain,
+        discrepancy_strain_rms: s.discrepancy_strain_rms(),
+        sigma_eps: cal.sigma_eps(),
+        timings_s: ScenarioTimings {
+            module2: tm.module2_s(),
+            module3: tm.coefficients_s + tm.module3_s,
+            total: t_total.elapsed().as_secs_f64(),
+        },
+        sensitivity: sens,
+        conditional,
+    };
+    Ok((result, cal, s.model))
+}
+
+/// Runs both scenarios, reporting progress to `observer`. `on_scenario` is called after each
+/// one (e.g. to write plots).
+pub fn reproduce(
+    opts: &ReproduceOptions,
+    observer: &dyn bamudi::observe::Observer,
+    mut on_scenario: impl FnMut(&ScenarioResult, &Calibration, &GateMultiLevel) -> Result<()>,
+) -> Result<ReproduceReport> {
+    let t = Instant::now();
+    let (contact, gate) = build_gate(opts.mesh_element_size)?;
+    let mut scenarios = Vec::new();
+    for number in [1u8, 2] {
+        let (res, cal, model) = run_scenario(&contact, number, opts, observer)?;
+        on_scenario(&res, &cal, &model)?;
+        scenarios.push(res);
+    }
+    Ok(ReproduceReport {
+        options: opts.clone(),
+        gate,
+        scenarios,
+        total_s: t.elapsed().as_secs_f64(),
+    })
+}

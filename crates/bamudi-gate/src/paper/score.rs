@@ -1,0 +1,105 @@
+//! Scoring a calibration against the synthetic truth (only here, never inside a calibration).
+
+use super::{ForceRmse, StrainRmse};
+use crate::error::Result;
+use bamudi::{Calibration, SupportPolicy};
+use mitergate::data::truth::{self, Scenario};
+use mitergate::{ContactModel, GateMultiLevel};
+use mlmodel::{LinearObservableModel, ObservableModel, UnobservableModel};
+use nalgebra::DVector;
+
+pub(super) fn rms(values: impl Iterator<Item = f64>) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for v in values {
+        ss += v * v;
+        n += 1;
+    }
+    (ss / n.max(1) as f64).sqrt()
+}
+
+/// Prior-averaged response `Σ_j w_j g_u(x, θ_j)` (Eq. 2), the "before calibration" model.
+fn prior_mean_response(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
+    let rule = model.prior.quadrature(8)?;
+    weighted_response(model, x, rule.nodes.iter().map(|t| t[0]).zip(rule.weights))
+}
+
+fn weighted_response(
+    model: &GateMultiLevel,
+    x: &[f64],
+    nodes: impl Iterator<Item = (f64, f64)>,
+) -> Result<Vec<f64>> {
+    let n = model.unobservable.response_len();
+    let (mut acc, mut g) = (vec![0.0; n], vec![0.0; n]);
+    for (theta, w) in nodes {
+        model.unobservable.evaluate(x, &[theta], &mut g)?;
+        acc.iter_mut().zip(&g).for_each(|(a, v)| *a += w * v);
+    }
+    Ok(acc)
+}
+
+/// Strains `A g + s_w` of the no-discrepancy calibration, averaged over its θ posterior.
+fn no_discrepancy_strain(model: &GateMultiLevel, cal: &Calibration, x: &[f64]) -> Result<Vec<f64>> {
+    let support = cal
+        .module3()
+        .posterior_no_discrepancy
+        .support(&SupportPolicy::default());
+    let g = weighted_response(model, x, support.iter().map(|(t, w)| (t[0], *w)))?;
+    let mut b = vec![0.0; model.observable.output_dim()];
+    model.observable.offset(x, &[0.0], &mut b)?;
+    let s = model.observable.matrix() * DVector::from_vec(g) + DVector::from_vec(b);
+    Ok(s.iter().copied().collect())
+}
+
+/// Force and strain errors of one calibration at the new conditions.
+pub(super) struct Scores {
+    pub(super) force: ForceRmse,
+    pub(super) strain: StrainRmse,
+}
+
+/// Force RMSE before/after and strain RMSE with/without the discrepancy at `new_x`.
+pub(super) fn score(
+    model: &GateMultiLevel,
+    cal: &Calibration,
+    scenario: &Scenario,
+    contact: &ContactModel,
+    new_x: &[[f64; 2]],
+) -> Result<Scores> {
+    let nu = contact.gate().n_points();
+    let predictor = cal.predictor(model)?;
+    let (mut dn_b, mut dn_a, mut dt_b, mut dt_a) = (vec![], vec![], vec![], vec![]);
+    let (mut ds_w, mut ds_wo) = (vec![], vec![]);
+    for x in new_x {
+        let truth_f = truth::true_forces(scenario, contact, *x)?;
+        let before = prior_mean_response(model, x)?;
+        let after = predictor.response(x)?.mean;
+        for b in 0..2 * nu {
+            let (eb, ea) = (before[b] - truth_f[b], after[b] - truth_f[b]);
+            if b < nu {
+                dn_b.push(eb);
+                dn_a.push(ea);
+            } else {
+                dt_b.push(eb);
+                dt_a.push(ea);
+            }
+        }
+        let true_strain = contact.gate().strain(&truth_f, x[0], x[1]);
+        let with = predictor.outputs(x)?.mean;
+        let without = no_discrepancy_strain(model, cal, x)?;
+        for p in 0..true_strain.len() {
+            ds_w.push(with[p] - true_strain[p]);
+            ds_wo.push(without[p] - true_strain[p]);
+        }
+    }
+    Ok(Scores {
+        force: ForceRmse {
+            normal_before: rms(dn_b.into_iter()),
+            normal_after: rms(dn_a.into_iter()),
+            tangential_before: rms(dt_b.into_iter()),
+            tangential_after: rms(dt_a.into_iter()),
+        },
+        strain: StrainRmse {
+            with_discrepancy: rms(ds_w.into_iter()),
+            without_discrepancy: rms(ds_wo.into_iter()),
+        },
+    })
+}

@@ -1,0 +1,5 @@
+//! What a calibration and a close-loop run leave on disk: `results.json`, `report.md` and SVG
+//! plots.
+
+pub mod calibration;
+pub mod closeloop;

@@ -1,0 +1,46 @@
+//! Close-the-loop tests on simulated field records: the loop must name the effect the
+//! simulator switched on (it is never told which), bring the held-out RMSE near the noise
+//! level, move the gap estimate toward the truth, and add nothing to a clean record.
+
+mod fe_gate;
+mod scenarios;
+
+use bamudi::closeloop::testing::{GridCalibrator, ToyGate, toy_load};
+use bamudi::closeloop::{CloseLoopConfig, CloseLoopOutcome, IngestConfig, close_loop, parse_csv};
+use mitergate::data::field::{FieldConfig, FieldEffects, FieldRecord, simulate};
+
+/// Gap prior of the test calibrator (in), wide enough for every scenario.
+pub const GAP_BOUNDS: (f64, f64) = (40.0, 200.0);
+
+/// Simulates a record with the toy gate as the TRUE strain model.
+pub fn record(cfg: FieldConfig) -> FieldRecord {
+    let gate = ToyGate::default();
+    simulate(&cfg, &|hu, hd, gap| gate.strain(hu, hd, gap)).unwrap()
+}
+
+/// Runs the loop on the record's CSV text, exactly as measured data would be read.
+pub fn run(rec: &FieldRecord) -> CloseLoopOutcome {
+    let gauges: Vec<&str> = rec.gauge_names.iter().map(String::as_str).collect();
+    let ingest = IngestConfig::new(&["h_up", "h_down"], &gauges);
+    let data = parse_csv(&rec.to_csv_string(), "simulated.csv", &ingest).unwrap();
+    close_loop(
+        &data,
+        &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
+        &toy_config(),
+    )
+    .unwrap()
+}
+
+/// Two months, hourly by default.
+pub fn base(seed: u64, effects: FieldEffects) -> FieldConfig {
+    FieldConfig::default().seed(seed).effects(effects)
+}
+
+/// The loop's settings for the gate-like test model: the head as the load, the gap as the
+/// parameter (as `bamudi_gate::gate::close_loop_config` sets them for the real gate).
+pub fn toy_config() -> CloseLoopConfig {
+    CloseLoopConfig::default()
+        .load(toy_load())
+        .parameter_name("gap")
+        .output_unit("microstrain")
+}

@@ -1,0 +1,6 @@
+//! Tests of the gate application: the `bamudi` binary (bad input, the simulate → calibrate →
+//! predict → close-loop round trip) and the close loop on simulated field records (the
+//! gate-like test model, and the finite-element gate with the BA-MUDI calibrator).
+
+mod cli;
+mod closeloop;

@@ -1,0 +1,413 @@
+//! The executor of Modules 2-3 ([`Calibrate`], [`calibrate`]) and its result ([`Calibration`]).
+//!
+//! The executor runs the stages of [`crate::module2`] and [`crate::module3`] in order, times
+//! each one and reports it to the [`Observer`]; the stages themselves neither read the clock
+//! nor print. A [`Calibration`] holds the checked configuration, what it needs to know of the
+//! data and the model, the results of both modules and the timings; Module 4 is its
+//! [`predictor`](Calibration::predictor).
+
+use crate::data::Experiments;
+use crate::error::{BamudiError, Result};
+use crate::module2::estimator::FittedEstimator;
+use crate::module2::gps::CoefficientGps;
+use crate::module2::training::LinearParts;
+use crate::module2::{self, Module2, Problem};
+use crate::module3::coefficients::strategy;
+use crate::module3::{self, Module3};
+use crate::observe::{Event, Observer, Silent, Stage};
+use crate::params::CalibrationConfig;
+use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Wall-clock seconds spent in each stage.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timings {
+    /// Module 2: training-set generation (Eq. 27).
+    pub training_set_s: f64,
+    /// Module 2: fitting the coefficient estimator (Eq. 29).
+    pub estimator_s: f64,
+    /// Module 2: `ρ*` search and `α̂` (Eq. 30-32).
+    pub rho_s: f64,
+    /// Module 2: coefficient GPs (Eq. 33-37).
+    pub gp_s: f64,
+    /// Module 3: the coefficient strategy's own search (the conditional mode's profile and
+    /// GP refit; 0 in the paper's mode).
+    #[serde(default)]
+    pub coefficients_s: f64,
+    /// Module 3: covariance factorisation and posterior of `θ` (both variants).
+    pub module3_s: f64,
+}
+
+impl Timings {
+    /// Seconds of Module 2 (training set, estimator, `ρ*`, GPs).
+    pub fn module2_s(&self) -> f64 {
+        self.training_set_s + self.estimator_s + self.rho_s + self.gp_s
+    }
+}
+
+/// What a [`Calibration`] remembers of the model it was fitted to, so that Module 4 refuses a
+/// different one.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct ModelSignature {
+    input_names: Vec<String>,
+    output_names: Vec<String>,
+    response_len: usize,
+    n_coefficients: usize,
+}
+
+/// The result of a BA-MUDI calibration (serialisable: [`save`](Self::save) /
+/// [`load`](Self::load)).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Calibration {
+    config: CalibrationConfig,
+    signature: ModelSignature,
+    x_experiments: DMatrix<f64>,
+    parts: LinearParts,
+    module2: Module2,
+    module3: Module3,
+    timings: Timings,
+}
+
+/// Runs Modules 2-3 of BA-MUDI for a linear observable model with the default (silent)
+/// observer; see [`Calibrate`].
+///
+/// ```
+/// # // a tiny two-level model: the response is θ at one point, the output reads it
+/// # use bamudi::{CalibrationParams, EstimatorParams, Experiments};
+/// # use mlmodel::*;
+/// # use nalgebra::DMatrix;
+/// # struct Lift;
+/// # impl UnobservableModel for Lift {
+/// #     fn input_names(&self) -> Vec<String> { vec!["x".into()] }
+/// #     fn param_dim(&self) -> usize { 1 }
+/// #     fn components(&self) -> usize { 1 }
+/// #     fn coordinates(&self) -> &[f64] { &[0.0, 0.5, 1.0] }
+/// #     fn evaluate(&self, x: &[f64], t: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
+/// #         for (o, d) in out.iter_mut().zip([0.0, 0.5, 1.0]) { *o = x[0] * (t[0] + d); }
+/// #         Ok(())
+/// #     }
+/// # }
+/// # struct Read(DMatrix<f64>);
+/// # impl ObservableModel for Read {
+/// #     fn output_names(&self) -> Vec<String> { vec!["a".into(), "b".into()] }
+/// #     fn evaluate(&self, x: &[f64], t: &[f64], y: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
+/// #         self.offset(x, t, out)?;
+/// #         for (o, v) in out.iter_mut().zip((&self.0 * nalgebra::DVector::from_column_slice(y)).iter()) { *o += v; }
+/// #         Ok(())
+/// #     }
+/// # }
+/// # impl LinearObservableModel for Read {
+/// #     fn matrix(&self) -> &DMatrix<f64> { &self.0 }
+/// #     fn offset(&self, _: &[f64], _: &[f64], out: &mut [f64]) -> mlmodel::Result<()> { out.fill(0.0); Ok(()) }
+/// # }
+/// let basis = DiscrepancyBasis::new(orthopoly::Family::Legendre, (0.0, 1.0), &[0.0, 0.5, 1.0], &[1]).unwrap();
+/// let a = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.5, 0.0, 1.0, 0.5]);
+/// let model = MultiLevelModel::new(Lift, Read(a), Box::new(UniformPrior::new(vec![(0.0, 4.0)]).unwrap()), basis).unwrap();
+/// let x = DMatrix::from_fn(12, 1, |i, _| 1.0 + i as f64);
+/// let y = DMatrix::from_fn(12, 2, |i, p| (1.0 + i as f64) * (2.0 + [0.5, 1.0][p]) + 0.01 * ((i * 7 + p) % 5) as f64);
+/// let exps = Experiments::new(vec!["x".into()], vec!["a".into(), "b".into()], x, y).unwrap();
+/// let cfg = CalibrationParams::default().estimator(EstimatorParams::ExactLinear).gp_restarts(0).check().unwrap();
+/// let cal = bamudi::calibrate(&model, &exps, &cfg).unwrap();
+/// assert!(cal.module3().posterior.mean()[0] > 0.0);
+/// ```
+pub fn calibrate<U, O>(
+    model: &MultiLevelModel<U, O>,
+    exps: &Experiments,
+    cfg: &CalibrationConfig,
+) -> Result<Calibration>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    Calibrate::new(cfg).run(model, exps)
+}
+
+/// The calibration executor: a checked configuration and an observer; [`run`](Self::run)
+/// executes the stages, times them and reports them.
+pub struct Calibrate<'a> {
+    cfg: &'a CalibrationConfig,
+    observer: &'a dyn Observer,
+}
+
+impl<'a> Calibrate<'a> {
+    /// An executor with a silent observer.
+    pub fn new(cfg: &'a CalibrationConfig) -> Self {
+        Self {
+            cfg,
+            observer: &Silent,
+        }
+    }
+
+    /// Reports progress and stage timings to `observer`.
+    pub fn observer(mut self, observer: &'a dyn Observer) -> Self {
+        self.observer = observer;
+        self
+    }
+
+    /// Modules 2-3 from scratch.
+    pub fn run<U, O>(
+        &self,
+        model: &MultiLevelModel<U, O>,
+        exps: &Experiments,
+    ) -> Result<Calibration>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let p = Problem::new(model, exps, self.cfg, self.observer)?;
+        let mut t = Timings::default();
+        let training = self.stage(Stage::TrainingSet, &mut t.training_set_s, || {
+            module2::training_set(&p)
+        })?;
+        let estimator = self.stage(Stage::Estimator, &mut t.estimator_s, || {
+            module2::fit_estimator(&p, training.as_ref())
+        })?;
+        let pool = training.as_ref().map_or(0, |s| s.pool_size);
+        drop(training);
+        self.finish(p, estimator, pool, t)
+    }
+
+    /// Modules 2-3 with an estimator fitted before (e.g. by another calibration of the same
+    /// data): the training set and the fit are skipped. `training_pool_size` is recorded as
+    /// given.
+    pub fn run_with_estimator<U, O>(
+        &self,
+        model: &MultiLevelModel<U, O>,
+        exps: &Experiments,
+        estimator: FittedEstimator,
+        training_pool_size: usize,
+    ) -> Result<Calibration>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let p = Problem::new(model, exps, self.cfg, self.observer)?;
+        self.finish(p, estimator, training_pool_size, Timings::default())
+    }
+
+    /// `ρ*`, `α̂`, the GPs (Module 2) and Module 3.
+    fn finish<U, O>(
+        &self,
+        p: Problem<'_, U, O>,
+        estimator: FittedEstimator,
+        training_pool_size: usize,
+        mut t: Timings,
+    ) -> Result<Calibration>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let (ctx, rho, alpha_hat) = self.stage(Stage::Rho, &mut t.rho_s, || {
+            let ctx = module2::contexts(&p)?;
+            let (rho, alpha) = module2::rho_and_alpha(&p, &estimator, &ctx)?;
+            Ok((ctx, rho, alpha))
+        })?;
+        let gps = self.stage(Stage::CoefficientGps, &mut t.gp_s, || {
+            module2::coefficient_gps(&p, &alpha_hat)
+        })?;
+        let m2 = Module2 {
+            x_bounds: p.x_bounds.clone(),
+            theta_rule: p.theta_rule.clone(),
+            training_pool_size,
+            estimator,
+            rho,
+            alpha_hat,
+            gps,
+        };
+        let strategy = strategy::<U, O>(self.cfg.coefficients);
+        let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
+            module3::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
+        })?;
+        let m3 = self.stage(Stage::Module3, &mut t.module3_s, || {
+            module3::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
+        })?;
+        Ok(Calibration {
+            config: self.cfg.clone(),
+            signature: ModelSignature::of(p.model),
+            x_experiments: p.exps.x.clone(),
+            parts: p.parts,
+            module2: m2,
+            module3: m3,
+            timings: t,
+        })
+    }
+
+    /// Runs one stage: reports its start and end, and adds its wall time to `seconds`.
+    fn stage<T>(
+        &self,
+        stage: Stage,
+        seconds: &mut f64,
+        f: impl FnOnce() -> Result<T>,
+    ) -> Result<T> {
+        self.observer.observe(&Event::Started { stage, work: 0 });
+        let start = Instant::now();
+        let out = f()?;
+        let elapsed = start.elapsed().as_secs_f64();
+        *seconds += elapsed;
+        self.observer.observe(&Event::Finished {
+            stage,
+            seconds: elapsed,
+        });
+        Ok(out)
+    }
+}
+
+impl ModelSignature {
+    fn of<U: UnobservableModel, O: LinearObservableModel>(model: &MultiLevelModel<U, O>) -> Self {
+        Self {
+            input_names: model.unobservable.input_names(),
+            output_names: model.observable.output_names(),
+            response_len: model.unobservable.response_len(),
+            n_coefficients: model.basis.n_coefficients(),
+        }
+    }
+}
+
+impl Calibration {
+    /// The checked configuration used.
+    pub fn config(&self) -> &CalibrationConfig {
+        &self.config
+    }
+    /// Module 2's results.
+    pub fn module2(&self) -> &Module2 {
+        &self.module2
+    }
+    /// Module 3's results.
+    pub fn module3(&self) -> &Module3 {
+        &self.module3
+    }
+    /// Seconds per stage.
+    pub fn timings(&self) -> &Timings {
+        &self.timings
+    }
+    /// `A`, `L` and `B = A L` of the calibrated model.
+    pub fn parts(&self) -> &LinearParts {
+        &self.parts
+    }
+    /// Input names of the calibrated model.
+    pub fn input_names(&self) -> &[String] {
+        &self.signature.input_names
+    }
+    /// Output names of the calibrated model.
+    pub fn output_names(&self) -> &[String] {
+        &self.signature.output_names
+    }
+    /// The experiment inputs the coefficient GPs were fitted at (`N_e x d`).
+    pub fn x_experiments(&self) -> &DMatrix<f64> {
+        &self.x_experiments
+    }
+    /// `ρ*` used by Modules 3-4.
+    pub fn rho_star(&self) -> f64 {
+        self.module3.rho_star
+    }
+    /// `σ_ε` used by Module 3 (output units).
+    pub fn sigma_eps(&self) -> f64 {
+        self.module3.sigma_eps
+    }
+    /// The coefficient GPs Module 4 uses (the conditional mode's refit, or Module 2's).
+    pub fn coefficient_gps(&self) -> &CoefficientGps {
+        self.module3.refit_gps.as_ref().unwrap_or(&self.module2.gps)
+    }
+    /// The coefficient estimates behind those GPs: the conditional mode's posterior-averaged
+    /// `E_θ[α̂(θ)]`, or Module 2's `α̂` (Eq. 32), `N_e x K`.
+    pub fn alpha_hat(&self) -> &DMatrix<f64> {
+        self.module3
+            .alpha_hat
+            .as_ref()
+            .unwrap_or(&self.module2.alpha_hat)
+    }
+
+    /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
+    /// `N x K` matrices): the coefficient GPs, plus, in the conditional coefficient mode, the
+    /// shift `Σ_k(x, X) w_k` of the posterior-averaged `α̂(θ)`.
+    pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+        let gps = self.coefficient_gps();
+        let (mut mean, var) = gps.predict(x)?;
+        if let Some(w) = &self.module3.alpha_correction {
+            for k in 0..mean.ncols() {
+                let cross = gps.covariance(k, x, &self.x_experiments)?;
+                let shift = cross * w.column(k);
+                mean.column_mut(k)
+                    .iter_mut()
+                    .zip(shift.iter())
+                    .for_each(|(m, s)| *m += s);
+            }
+        }
+        Ok((mean, var))
+    }
+
+    /// Checks that `model` is the one this calibration was fitted to.
+    pub(crate) fn check_model<U, O>(&self, model: &MultiLevelModel<U, O>) -> Result<()>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let got = ModelSignature::of(model);
+        if got != self.signature {
+            return Err(BamudiError::Calibration(format!(
+                "the model differs from the calibrated one: calibrated {:?}, given {got:?}",
+                self.signature
+            )));
+        }
+        if model.observable.matrix() != &self.parts.a {
+            return Err(BamudiError::Calibration(
+                "the model's matrix A differs from the calibrated one".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Saves the whole calibration (configuration, estimator, GPs, posteriors) as JSON,
+    /// atomically, so that a later run can predict (Module 4) or report without
+    /// re-calibrating.
+    pub fn save(&self, path: &std::path::Path) -> Result<()> {
+        let text = serde_json::to_string(self).map_err(|e| BamudiError::Serde {
+            context: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        crate::data::write_atomic(path, text.as_bytes())
+    }
+
+    /// Loads a calibration saved by [`save`](Self::save); its configuration is checked again.
+    ///
+    /// ```
+    /// let err = bamudi::Calibration::load(std::path::Path::new("/nonexistent.json")).unwrap_err();
+    /// assert!(err.to_string().contains("/nonexistent.json"));
+    /// ```
+    pub fn load(path: &std::path::Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|e| BamudiError::Io {
+            path: path.display().to_string(),
+            source: e,
+        })?;
+        let cal: Self = serde_json::from_str(&text).map_err(|e| BamudiError::Serde {
+            context: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        cal.validate().map_err(|reason| BamudiError::Serde {
+            context: path.display().to_string(),
+            reason,
+        })?;
+        Ok(cal)
+    }
+
+    /// Consistency of a loaded calibration (sizes, a positive `σ_ε`).
+    fn validate(&self) -> std::result::Result<(), String> {
+        let s = self.module3.sigma_eps;
+        if !(s.is_finite() && s > 0.0) {
+            return Err(format!("sigma_eps must be a positive number, got {s}"));
+        }
+        let k = self.signature.n_coefficients;
+        let (n_e, d) = self.x_experiments.shape();
+        if self.parts.b.ncols() != k || self.coefficient_gps().len() != k {
+            return Err(format!(
+                "{k} discrepancy coefficients, but B or the GPs disagree"
+            ));
+        }
+        if d != self.signature.input_names.len() || self.alpha_hat().nrows() != n_e {
+            return Err("experiment inputs and coefficient estimates disagree in size".into());
+        }
+        Ok(())
+    }
+}

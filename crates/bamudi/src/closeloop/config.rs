@@ -1,0 +1,232 @@
+//! Settings of the loop and the declared load of a model's inputs.
+
+use crate::error::BamudiError;
+use serde::{Deserialize, Serialize};
+
+/// A scalar load of the model inputs, `Σ_j weights_j x_j` (a gate's head `h_up − h_down`),
+/// with the input that completes it to a coordinate pair (the gate's lower level) and the
+/// level below which the model is unloaded (a gate with less than 1 in of head is open: no
+/// thrust, no quoin force, no discrepancy).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    /// Feature name of the load (e.g. `head`).
+    pub name: String,
+    /// Weight of each model input.
+    pub weights: Vec<f64>,
+    /// The input paired with the load in the load nuisance's polynomial.
+    pub companion: usize,
+    /// Rows with a smaller load are unloaded.
+    pub active_above: f64,
+}
+
+impl LoadSpec {
+    /// The load `x[plus] − x[minus]` of `n_inputs` inputs, paired with `x[minus]`, active above
+    /// `active_above`.
+    pub fn difference(
+        name: &str,
+        plus: usize,
+        minus: usize,
+        n_inputs: usize,
+        active_above: f64,
+    ) -> Self {
+        let mut weights = vec![0.0; n_inputs];
+        weights[plus] = 1.0;
+        weights[minus] = -1.0;
+        Self {
+            name: name.into(),
+            weights,
+            companion: minus,
+            active_above,
+        }
+    }
+
+    /// The load at inputs `x`.
+    pub fn value(&self, x: &[f64]) -> f64 {
+        let mut v = 0.0;
+        for (w, xi) in self.weights.iter().zip(x) {
+            if *w != 0.0 {
+                v += w * xi;
+            }
+        }
+        v
+    }
+
+    /// Whether the model is unloaded at `x`.
+    pub fn unloaded(&self, x: &[f64]) -> bool {
+        self.value(x) < self.active_above
+    }
+
+    fn validate(&self) -> Result<(), BamudiError> {
+        if self.companion >= self.weights.len() || self.weights.iter().all(|w| *w == 0.0) {
+            return Err(BamudiError::config(
+                "load",
+                format!(
+                    "needs non-zero weights and a companion input among its {} inputs",
+                    self.weights.len()
+                ),
+            ));
+        }
+        if !self.active_above.is_finite() {
+            return Err(BamudiError::config("load.active_above", "must be finite"));
+        }
+        Ok(())
+    }
+}
+
+/// Settings of the loop. Defaults in brackets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CloseLoopConfig {
+    /// Fraction of the record (in time order) used for calibration [0.6].
+    pub calibration_fraction: f64,
+    /// Maximum number of effects added [4].
+    pub max_steps: usize,
+    /// Minimum relative reduction of the held-out mean square error to accept an effect [0.05].
+    pub min_relative_improvement: f64,
+    /// Temperature columns for the thermal effect; `None` = every column whose name contains
+    /// `temp` [None].
+    pub temperature_columns: Option<Vec<String>>,
+    /// The scalar load of the model inputs, when the model has one (a gate's head): it gives
+    /// the load-path hysteresis effect and the load nuisance [None].
+    pub load: Option<LoadSpec>,
+    /// Name of the scalar parameter `θ` in effect names and reports, e.g. `gap` gives the
+    /// effect `time_varying_gap` [`parameter`].
+    pub parameter_name: String,
+    /// Unit of the outputs, in effect parameter reports [`output units`].
+    pub output_unit: String,
+    /// Segments of the calibration window for the time-varying gap [6].
+    pub gap_segments: usize,
+    /// Maximum number of covariates in the generic term [3].
+    pub max_generic_features: usize,
+    /// How the generic term selects its covariates [stepwise BIC].
+    #[serde(skip)]
+    pub generic_selection: super::effects::Selection,
+    /// Lags of the Ljung-Box test [10].
+    pub ljung_box_lags: usize,
+    /// Family-wise significance level of the adequacy checks per window [0.01].
+    pub significance: f64,
+    /// Candidates re-calibrated at each step to decide between them [3]; at least 2 are
+    /// (the best library effect and the best generic term) when both pass the screening.
+    pub confirm_candidates: usize,
+}
+
+impl Default for CloseLoopConfig {
+    fn default() -> Self {
+        Self {
+            calibration_fraction: 0.6,
+            max_steps: 4,
+            min_relative_improvement: 0.05,
+            temperature_columns: None,
+            load: None,
+            parameter_name: "parameter".into(),
+            output_unit: "output units".into(),
+            gap_segments: 6,
+            max_generic_features: 3,
+            generic_selection: super::effects::Selection::StepwiseBic,
+            ljung_box_lags: 10,
+            significance: 0.01,
+            confirm_candidates: 3,
+        }
+    }
+}
+
+impl CloseLoopConfig {
+    /// Sets the calibration fraction.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().calibration_fraction(0.5);
+    /// assert_eq!(c.calibration_fraction, 0.5);
+    /// ```
+    pub fn calibration_fraction(mut self, f: f64) -> Self {
+        self.calibration_fraction = f;
+        self
+    }
+    /// Sets the maximum number of effects.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().max_steps(2);
+    /// assert_eq!(c.max_steps, 2);
+    /// ```
+    pub fn max_steps(mut self, n: usize) -> Self {
+        self.max_steps = n;
+        self
+    }
+    /// Sets the minimum relative held-out improvement.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().min_relative_improvement(0.1);
+    /// assert_eq!(c.min_relative_improvement, 0.1);
+    /// ```
+    pub fn min_relative_improvement(mut self, f: f64) -> Self {
+        self.min_relative_improvement = f;
+        self
+    }
+
+    /// Sets how many screened candidates are re-calibrated per step.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().confirm_candidates(4);
+    /// assert_eq!(c.confirm_candidates, 4);
+    /// ```
+    pub fn confirm_candidates(mut self, k: usize) -> Self {
+        self.confirm_candidates = k;
+        self
+    }
+
+    /// Declares the model inputs' scalar load.
+    ///
+    /// ```
+    /// use bamudi::closeloop::{CloseLoopConfig, LoadSpec};
+    /// let c = CloseLoopConfig::default().load(LoadSpec::difference("head", 0, 1, 2, 1.0));
+    /// assert_eq!(c.load.unwrap().value(&[500.0, 100.0]), 400.0);
+    /// ```
+    pub fn load(mut self, load: LoadSpec) -> Self {
+        self.load = Some(load);
+        self
+    }
+
+    /// Names the outputs' unit (in effect parameter reports).
+    pub fn output_unit(mut self, unit: &str) -> Self {
+        self.output_unit = unit.to_string();
+        self
+    }
+
+    /// Names the scalar parameter `θ` (in effect names and reports).
+    pub fn parameter_name(mut self, name: &str) -> Self {
+        self.parameter_name = name.to_string();
+        self
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), BamudiError> {
+        let bad = |name, reason: String| Err(BamudiError::InvalidConfig { name, reason });
+        if !(self.calibration_fraction > 0.0 && self.calibration_fraction < 1.0) {
+            return bad(
+                "calibration_fraction",
+                format!("must be in (0, 1), got {}", self.calibration_fraction),
+            );
+        }
+        if self.min_relative_improvement.is_nan() || self.min_relative_improvement < 0.0 {
+            return bad(
+                "min_relative_improvement",
+                format!("must be >= 0, got {}", self.min_relative_improvement),
+            );
+        }
+        if !(self.significance > 0.0 && self.significance < 1.0) {
+            return bad(
+                "significance",
+                format!("must be in (0, 1), got {}", self.significance),
+            );
+        }
+        if self.confirm_candidates == 0 {
+            return bad("confirm_candidates", "must be >= 1".into());
+        }
+        if self.ljung_box_lags == 0 {
+            return bad("ljung_box_lags", "must be >= 1".into());
+        }
+        if let Some(l) = &self.load {
+            l.validate()?;
+        }
+        Ok(())
+    }
+}

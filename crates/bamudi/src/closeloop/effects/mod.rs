@@ -1,0 +1,57 @@
+//! The built-in effects (each an [`Effect`](super::Effect)) and the default library.
+
+mod basic;
+mod generic;
+mod lasso;
+mod linear;
+mod load_path;
+mod thermal;
+mod trend;
+
+pub use basic::{GaugeDrift, GaugeOffset, OffsetJump};
+pub use generic::{Generic, Selection};
+pub use linear::{Basis, LinearTerm};
+pub use load_path::LoadPathHysteresis;
+pub use thermal::Thermal;
+pub use trend::ParameterTrend;
+
+use super::{CloseLoopConfig, Effect, MeasuredRecord};
+use std::sync::Arc;
+
+/// The library searched at every step when the caller gives none: gauge offset, drift and
+/// offset jump; a thermal term for every temperature column (the configured ones, or every
+/// column whose name contains `temp`); load-path hysteresis when a load is declared; a linear
+/// trend of the parameter; and the data-driven term last.
+pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<dyn Effect>> {
+    let temp_cols: Vec<String> = match &cfg.temperature_columns {
+        Some(c) => c.clone(),
+        None => rec
+            .covariate_names
+            .iter()
+            .filter(|c| c.to_lowercase().contains("temp"))
+            .cloned()
+            .collect(),
+    };
+    let mut library: Vec<Arc<dyn Effect>> = vec![
+        Arc::new(GaugeOffset),
+        Arc::new(GaugeDrift),
+        Arc::new(OffsetJump),
+    ];
+    for column in temp_cols {
+        library.push(Arc::new(Thermal { column }));
+    }
+    if let Some(load) = &cfg.load {
+        library.push(Arc::new(LoadPathHysteresis {
+            load: load.name.clone(),
+        }));
+    }
+    library.push(Arc::new(ParameterTrend {
+        parameter: cfg.parameter_name.clone(),
+        segments: cfg.gap_segments,
+    }));
+    library.push(Arc::new(Generic {
+        max_features: cfg.max_generic_features,
+        selection: cfg.generic_selection,
+    }));
+    library
+}

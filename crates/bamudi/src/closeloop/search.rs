@@ -1,0 +1,390 @@
+//! One run of the loop: the state (calibrated model, its moments, the accepted effects), the
+//! screening of every candidate, the confirmation by re-calibration and the back-fit.
+
+use super::effect::{Effect, EffectKind, FitContext, Fitted};
+use super::features::Features;
+use super::nuisance::{self, LoadNuisance};
+use super::stats::{mse_rows, select_rows};
+use super::{CalibratedModel, Calibrator, CandidateScore, CloseLoopConfig, ThetaSummary};
+use crate::error::Result;
+use nalgebra::DMatrix;
+use std::sync::Arc;
+
+/// A calibrated model with its predictive mean and variance at every row.
+type Calibrated = (Arc<dyn CalibratedModel>, DMatrix<f64>, DMatrix<f64>);
+
+/// The calibrated model, its predictive moments at every row and the accepted effects.
+#[derive(Clone)]
+pub(super) struct State {
+    pub(super) model: Arc<dyn CalibratedModel>,
+    pub(super) mean: DMatrix<f64>,
+    pub(super) var: DMatrix<f64>,
+    pub(super) effects: Vec<Fitted>,
+}
+
+impl State {
+    /// Whether an accepted effect keeps the model fixed (a parameter trend).
+    fn model_fixed(&self) -> bool {
+        self.effects.iter().any(|e| e.effect.keeps_model_fixed())
+    }
+}
+
+/// A candidate after screening, with its fit (kept for confirmation).
+struct Screened {
+    score: CandidateScore,
+    fitted: Fitted,
+    /// Held-out MSE gain over the reference (residual, or residual minus nuisance-only fit).
+    gain: f64,
+}
+
+/// Everything fixed during one run of the loop.
+pub(super) struct Loop<'a> {
+    pub(super) calibrator: &'a dyn Calibrator,
+    pub(super) x: &'a DMatrix<f64>,
+    pub(super) y: &'a DMatrix<f64>,
+    pub(super) feats: &'a Features,
+    pub(super) cal: &'a [usize],
+    pub(super) ho: &'a [usize],
+    pub(super) gauges: &'a [String],
+    pub(super) cfg: &'a CloseLoopConfig,
+    pub(super) nuisance: Option<LoadNuisance>,
+}
+
+/// What one step's search decided: the new state with the accepted effect, or nothing.
+pub(super) struct SearchOutcome {
+    pub(super) accepted: Option<(State, String, String)>,
+    pub(super) decision: String,
+}
+
+impl Loop<'_> {
+    pub(super) fn calibrate(&self, y_adj: &DMatrix<f64>) -> Result<Calibrated> {
+        let model = self.calibrator.calibrate(
+            &select_rows(self.x, self.cal),
+            &select_rows(y_adj, self.cal),
+        )?;
+        let (mean, var) = model.predict(self.x)?;
+        Ok((Arc::from(model), mean, var))
+    }
+
+    fn context<'s>(&'s self, st: &'s State) -> FitContext<'s> {
+        FitContext {
+            feats: self.feats,
+            x: self.x,
+            cal: self.cal,
+            model: st.model.as_ref(),
+            base_mean: &st.mean,
+            gauges: self.gauges,
+            unit: &self.cfg.output_unit,
+        }
+    }
+
+    /// The load nuisance, where a re-calibration of `st`'s model would absorb load
+    /// functions: its model says so, and no effect keeps the model fixed.
+    fn nuisance_for(&self, st: &State, adds_fixing_effect: bool) -> Option<&LoadNuisance> {
+        let recalibrates = !(st.model_fixed() || adds_fixing_effect);
+        self.nuisance
+            .as_ref()
+            .filter(|_| recalibrates && st.model.absorbs_load_functions())
+    }
+
+    /// Data minus model mean minus every accepted effect.
+    pub(super) fn residual(&self, st: &State) -> Result<DMatrix<f64>> {
+        Ok(self.y - &st.mean - self.effect_sum(st)?)
+    }
+
+    /// One step: screen every candidate, confirm the most promising by re-calibrating with
+    /// each, and accept the best confirmed one if it clears the margin.
+    pub(super) fn search(
+        &self,
+        st: &State,
+        library: &[Arc<dyn Effect>],
+        r: &DMatrix<f64>,
+        mse_before: f64,
+    ) -> Result<(Vec<CandidateScore>, SearchOutcome)> {
+        let margin = self.cfg.min_relative_improvement * mse_before;
+        let mut screened = self.screen(st, library, r, mse_before)?;
+        // screening only approximates a re-calibration (the seed-5 jump screened at 1.84 and
+        // re-calibrated at 1.07 microstrain²), so a candidate is confirmed unless screening
+        // credits it with less than half the margin
+        let picks = confirmation_picks(&screened, 0.5 * margin, self.cfg.confirm_candidates);
+        let mut trials: Vec<Trial> = vec![];
+        for &k in &picks {
+            let (state, settled) = self.with_effect(st, screened[k].fitted.clone())?;
+            let mse = mse_rows(&self.residual(&state)?, self.ho);
+            screened[k].score.recalibrated_heldout_mse = Some(mse);
+            screened[k].score.recalibrated_relative_improvement = Some(1.0 - mse / mse_before);
+            trials.push(Trial {
+                index: k,
+                state,
+                settled,
+                mse,
+            });
+        }
+        let choice = preferred(&screened, &trials, margin);
+        let outcome = self.decide(&screened, trials, choice, mse_before)?;
+        sort_confirmed_first(&mut screened);
+        Ok((screened.into_iter().map(|s| s.score).collect(), outcome))
+    }
+
+    /// The step's outcome for the chosen trial (position in `trials`), if any: accepted when it
+    /// lowers the held-out MSE by more than the margin (then it finishes its back-fit).
+    fn decide(
+        &self,
+        screened: &[Screened],
+        mut trials: Vec<Trial>,
+        choice: Option<usize>,
+        mse_before: f64,
+    ) -> Result<SearchOutcome> {
+        let margin = self.cfg.min_relative_improvement * mse_before;
+        let (pct, unit) = (|v: f64| 100.0 * v, &self.cfg.output_unit);
+        let min_pct = pct(self.cfg.min_relative_improvement);
+        let Some(at) = choice else {
+            let decision = match screened.first() {
+                Some(s) => format!(
+                    "no candidate lowers the held-out MSE by {min_pct:.1} % (best screened: {}, {:.1} %)",
+                    s.score.name,
+                    pct(s.gain / mse_before)
+                ),
+                None => "no candidate applies".into(),
+            };
+            return Ok(SearchOutcome {
+                accepted: None,
+                decision,
+            });
+        };
+        let (mse, name) = (
+            trials[at].mse,
+            screened[trials[at].index].score.name.clone(),
+        );
+        let better = pct(1.0 - mse / mse_before);
+        if mse_before - mse <= margin {
+            let decision = format!(
+                "no candidate lowers the held-out MSE by {min_pct:.1} % after re-calibration (best: {name}, {better:.1} %)"
+            );
+            return Ok(SearchOutcome {
+                accepted: None,
+                decision,
+            });
+        }
+        let mut trial = trials.swap_remove(at);
+        if !trial.settled {
+            self.recalibrate_and_backfit(&mut trial.state, MAX_BACKFIT_ROUNDS - CONFIRM_ROUNDS)?;
+        }
+        let decision = format!(
+            "accepted {name}: held-out MSE {mse_before:.3} -> {mse:.3} {unit}^2 after re-calibration ({better:.1} % better, threshold {min_pct:.1} %)"
+        );
+        Ok(SearchOutcome {
+            accepted: Some((trial.state, name, decision.clone())),
+            decision,
+        })
+    }
+
+    /// Every candidate fitted on the calibration window (jointly with the load nuisance where
+    /// a re-calibration would absorb one) and scored on the held-out window; best gain first.
+    fn screen(
+        &self,
+        st: &State,
+        library: &[Arc<dyn Effect>],
+        r: &DMatrix<f64>,
+        mse_before: f64,
+    ) -> Result<Vec<Screened>> {
+        let ctx = self.context(st);
+        let accepted: Vec<String> = st.effects.iter().map(|e| e.effect.name()).collect();
+        // what the nuisance alone would leave, so that a candidate is credited only with what
+        // the re-calibration could not have done by itself (the same for every candidate)
+        let nuisance_only = self
+            .nuisance_for(st, false)
+            .map(|n| mse_rows(&(r - n.fit(r, self.cal)), self.ho));
+        let mut out = vec![];
+        for effect in library {
+            let repeatable = effect.kind() == EffectKind::DataDriven;
+            if accepted.contains(&effect.name()) && !repeatable {
+                continue;
+            }
+            let nu = self.nuisance_for(st, effect.keeps_model_fixed());
+            let Some(j) = nuisance::fit_jointly(effect, &ctx, r, nu)? else {
+                continue;
+            };
+            let reference = match (nu, nuisance_only) {
+                (Some(_), Some(mse)) => mse,
+                _ => mse_before,
+            };
+            let mse = mse_rows(&(r - &j.effect - &j.nuisance), self.ho);
+            out.push(Screened {
+                score: CandidateScore {
+                    name: j.fitted.report.name.clone(),
+                    covariates: j.fitted.report.covariates.clone(),
+                    heldout_mse: mse,
+                    relative_improvement: (reference - mse) / mse_before,
+                    recalibrated_heldout_mse: None,
+                    recalibrated_relative_improvement: None,
+                },
+                gain: reference - mse,
+                fitted: j.fitted,
+            });
+        }
+        out.sort_by(|a, b| b.gain.total_cmp(&a.gain));
+        Ok(out)
+    }
+
+    /// `st` with one more effect, re-calibrated and back-fitted for at most
+    /// [`CONFIRM_ROUNDS`] calibrations; `true` when the back-fit settled.
+    fn with_effect(&self, st: &State, fitted: Fitted) -> Result<(State, bool)> {
+        let mut trial = st.clone();
+        trial.effects.push(fitted);
+        let settled = self.recalibrate_and_backfit(&mut trial, CONFIRM_ROUNDS)?;
+        Ok((trial, settled))
+    }
+
+    /// Re-calibrates on the data minus the additive effects (the gap trend is model-relative
+    /// and is re-fitted instead), then re-fits every effect with the others held fixed, until
+    /// the re-fitted effects agree with those the calibration was given.
+    /// Returns whether it settled within `max_rounds` calibrations.
+    fn recalibrate_and_backfit(&self, st: &mut State, max_rounds: usize) -> Result<bool> {
+        let has_gap = st.model_fixed();
+        for _round in 0..max_rounds {
+            let given = self.effect_sum(st)?;
+            if !has_gap {
+                let (m, mean, var) = self.calibrate(&(self.y - &given))?;
+                st.model = m;
+                st.mean = mean;
+                st.var = var;
+            }
+            let nu = self.nuisance_for(st, false);
+            // each term evaluated once per round (a gap trend costs a contact solve per row)
+            // and replaced when its effect is re-fitted
+            let mut terms = self.contributions(st)?;
+            for k in 0..st.effects.len() {
+                let ctx = self.context(st);
+                let mut r = self.y - &st.mean;
+                for (j, c) in terms.iter().enumerate() {
+                    if j != k {
+                        r -= c;
+                    }
+                }
+                let effect = st.effects[k].effect.clone();
+                if let Some(j) = nuisance::fit_jointly(&effect, &ctx, &r, nu)? {
+                    terms[k] = j.effect;
+                    st.effects[k] = j.fitted;
+                }
+            }
+            let sum = sum_terms(&terms, self.y.shape());
+            let moved = mse_rows(&(&sum - &given), self.cal).sqrt();
+            let resid = mse_rows(&(self.y - &st.mean - &sum), self.cal).sqrt();
+            if has_gap || moved <= BACKFIT_TOL * resid {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+
+    /// Each accepted effect's contribution at every row (microstrain).
+    fn contributions(&self, st: &State) -> Result<Vec<DMatrix<f64>>> {
+        let ctx = self.context(st);
+        st.effects
+            .iter()
+            .map(|e| e.term.contribution(&ctx))
+            .collect()
+    }
+
+    /// The sum of the accepted effects' contributions at every row (microstrain).
+    fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>> {
+        Ok(sum_terms(&self.contributions(st)?, self.y.shape()))
+    }
+}
+
+/// `terms` added in order to a zero matrix of `shape`.
+fn sum_terms(terms: &[DMatrix<f64>], shape: (usize, usize)) -> DMatrix<f64> {
+    let mut sum = DMatrix::zeros(shape.0, shape.1);
+    for t in terms {
+        sum += t;
+    }
+    sum
+}
+
+/// Most calibrations in one back-fit.
+const MAX_BACKFIT_ROUNDS: usize = 10;
+/// Calibrations a candidate gets before it is scored. The right effect, fitted jointly with
+/// the load nuisance, settles in 2 (measured on the FE gate: the first re-calibration moves it
+/// by a quarter of the noise, the second by 0.2 %); a wrong one keeps trading signal with the
+/// discrepancy for 5-7 rounds while its error barely changes (2.14 -> 1.95 microstrain for a
+/// generic term on an offset-jump record), so the ranking is settled after 3. The accepted
+/// candidate then finishes its back-fit.
+const CONFIRM_ROUNDS: usize = 3;
+/// The back-fit stops when the re-fitted effects differ from those the calibration was given by
+/// less than this fraction of the residual RMS (calibration window): the calibration then saw
+/// data consistent with its effects to 2 % of the noise, which changes the residual's mean
+/// square by about 0.04 %, far below the 5 % margin the loop decides on.
+const BACKFIT_TOL: f64 = 0.02;
+
+/// A re-calibrated candidate: its index in the screened list, the state with it added, whether
+/// its back-fit settled, and its held-out MSE.
+struct Trial {
+    index: usize,
+    state: State,
+    settled: bool,
+    mse: f64,
+}
+
+/// The trial (position in `trials`) the step prefers: the best physical effect unless the
+/// best data-driven term beats it by `margin`.
+fn preferred(screened: &[Screened], trials: &[Trial], margin: f64) -> Option<usize> {
+    let data_driven = |t: &Trial| screened[t.index].fitted.effect.kind() == EffectKind::DataDriven;
+    let best = |want: bool| {
+        (0..trials.len())
+            .filter(|&i| data_driven(&trials[i]) == want)
+            .min_by(|&a, &b| trials[a].mse.total_cmp(&trials[b].mse))
+    };
+    match (best(false), best(true)) {
+        (Some(l), Some(g)) if trials[g].mse < trials[l].mse - margin => Some(g),
+        (Some(l), _) => Some(l),
+        (None, g) => g,
+    }
+}
+
+/// Confirmed candidates first, by their re-calibrated error; then the screened order.
+fn sort_confirmed_first(screened: &mut [Screened]) {
+    screened.sort_by(|a, b| {
+        let key = |s: &Screened| {
+            (
+                s.score.recalibrated_heldout_mse.is_none(),
+                s.score.recalibrated_heldout_mse.unwrap_or(-s.gain),
+            )
+        };
+        let (ka, kb) = (key(a), key(b));
+        ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
+    });
+}
+
+/// Which screened candidates (indices into `screened`, best gain first) are re-calibrated:
+/// those gaining more than `min_gain`, at most `k` of them, always including the best library
+/// effect and the best generic term among them so that the preference rule can be applied.
+fn confirmation_picks(screened: &[Screened], min_gain: f64, k: usize) -> Vec<usize> {
+    let eligible: Vec<usize> = (0..screened.len())
+        .filter(|&i| screened[i].gain > min_gain)
+        .collect();
+    let generic = |i: &usize| screened[*i].fitted.effect.kind() == EffectKind::DataDriven;
+    let mut picks: Vec<usize> = vec![];
+    picks.extend(eligible.iter().find(|i| !generic(i)));
+    picks.extend(eligible.iter().find(|i| generic(i)));
+    for i in eligible {
+        if picks.len() >= k {
+            break;
+        }
+        if !picks.contains(&i) {
+            picks.push(i);
+        }
+    }
+    picks
+}
+
+/// θ now: its value at the end of the record when an effect moves it, else the model's.
+pub(super) fn theta_now(st: &State) -> (ThetaSummary, String) {
+    match st.effects.iter().find_map(|e| e.parameter_end) {
+        Some((end, sd, half)) => (
+            ThetaSummary { mean: end, sd, ci95: (end - half, end + half) },
+            "the parameter at the end of the record from its fitted trend (95 % interval from the segment regression)".into(),
+        ),
+        None => (st.model.theta_summary(), "posterior of the last calibration".into()),
+    }
+}

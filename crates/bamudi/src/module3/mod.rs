@@ -1,0 +1,235 @@
+//! Module 3 of BA-MUDI (paper Sec. 3.4): the posterior of `θ`.
+//!
+//! The likelihood is Eq. 40 over all `N_e x N_o` observations with the analytic covariance of
+//! Eq. 51 ([`likelihood`]); its mean at a candidate `θ` is Eq. 50 with the coefficients the
+//! [`CoefficientStrategy`] of the configured mode gives ([`coefficients`]). One-dimensional `θ`
+//! gets exact grid quadrature, more dimensions adaptive Metropolis ([`grid`], [`mcmc`]); the
+//! "without discrepancy" posterior (`ρ = 1`, `δ = 0`, `V = σ_ε² I`; Fig. 16) comes with it.
+
+pub mod coefficients;
+pub mod conditional;
+pub mod grid;
+pub mod likelihood;
+pub mod mcmc;
+pub mod posterior;
+
+use crate::error::Result;
+use crate::module2::gps::CoefficientGps;
+use crate::module2::training::XContext;
+use crate::module2::{Module2, Problem};
+use coefficients::{CoefficientStrategy, Coefficients};
+use conditional::{ConditionalCoefficients, ModelRows, RhoProfile};
+use likelihood::{FactorReport, FactoredCovariance, assemble_covariance, iid_log_density};
+use mlmodel::{LinearObservableModel, UnobservableModel};
+use nalgebra::DMatrix;
+use posterior::{SupportPolicy, ThetaPosterior};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// The result of Module 3.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Module3 {
+    /// `ρ*` used in Modules 3-4 (the conditional mode's profile value, or Eq. 30's).
+    pub rho_star: f64,
+    /// The conditional mode's profile search for `ρ` (the Eq.-30 value is kept inside it).
+    pub rho_profile: Option<RhoProfile>,
+    /// The GPs refitted by the conditional mode, when they replace Module 2's.
+    pub refit_gps: Option<CoefficientGps>,
+    /// The conditional mode's posterior-averaged GP targets `E_θ[α̂(θ)]` (`N_e x K`).
+    pub alpha_hat: Option<DMatrix<f64>>,
+    /// The conditional mode's smoother weights (`N_e x K`) of `E_θ[α̂(θ)] − α̂`: the GP mean at
+    /// `x` becomes `μ_k(x) + Σ_k(x, X) w_k` ([`ConditionalCoefficients::weights`]).
+    pub alpha_correction: Option<DMatrix<f64>>,
+    /// `σ_ε` used (output units).
+    pub sigma_eps: f64,
+    /// Whether `σ_ε` was estimated rather than configured.
+    pub sigma_eps_estimated: bool,
+    /// Factorisation of the Eq.-51 covariance.
+    pub covariance: FactorReport,
+    /// Posterior of `θ` with the discrepancy model (Eq. 38-43).
+    pub posterior: ThetaPosterior,
+    /// Posterior of `θ` without discrepancy (`ρ = 1`, `δ = 0`, `V = σ_ε² I`; Fig. 16).
+    pub posterior_no_discrepancy: ThetaPosterior,
+}
+
+/// Module 3, first part: the strategy adapts Module 2's coefficients (the conditional mode's
+/// `ρ` profile search and GP refit).
+pub fn adapt_coefficients<U, O>(
+    p: &Problem<'_, U, O>,
+    m2: &Module2,
+    ctx: &[XContext],
+    strategy: &dyn CoefficientStrategy<U, O>,
+) -> Result<Coefficients>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    strategy.adapt(p, m2, ctx)
+}
+
+/// Module 3, second part: `σ_ε`, the Eq.-51 covariance and both `θ` posteriors.
+pub fn posterior<U, O>(
+    p: &Problem<'_, U, O>,
+    m2: &Module2,
+    ctx: &[XContext],
+    strategy: &dyn CoefficientStrategy<U, O>,
+    mut c: Coefficients,
+) -> Result<Module3>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    let cc = strategy.at_theta(p, m2, ctx, &c)?;
+    let (sigma_eps, sigma_eps_estimated) = match p.cfg.sigma_eps {
+        Some(s) => (s, false),
+        None => (strategy.estimate_sigma(p, ctx, &c, cc.as_ref())?, true),
+    };
+    let v = assemble_covariance(&p.parts.b, &c.moments.covs, sigma_eps * sigma_eps)?;
+    let factor = FactoredCovariance::new(&v, "Eq. 51 covariance V")?;
+    drop(v);
+    let lik = ThetaLikelihood {
+        res: ThetaResiduals {
+            p,
+            rho: c.rho_star,
+            shift: &c.moments.mean * p.parts.b.transpose(),
+            conditional: cc.as_ref(),
+        },
+        factor: &factor,
+        sigma2: sigma_eps * sigma_eps,
+    };
+    let bounds = p.model.prior.bounds();
+    let starts = |n, seed| p.model.prior.sample(n, seed);
+    let (post, post_without) = grid::posteriors(&lik, &bounds, starts, p.cfg, p.observer)?;
+    let correction = match &cc {
+        None => None,
+        Some(cc) => Some(lik.res.posterior_mean_delta(cc, &post)?),
+    };
+    drop(lik);
+    drop(cc);
+    let (alpha_hat, alpha_correction) = match correction {
+        None => (None, None),
+        Some(d) => {
+            let w = ConditionalCoefficients::weights(&d, &c.moments.noise_var);
+            c.alpha_hat += &d;
+            (Some(c.alpha_hat), Some(w))
+        }
+    };
+    Ok(Module3 {
+        rho_star: c.rho_star,
+        rho_profile: c.profile,
+        refit_gps: c.refit,
+        alpha_hat,
+        alpha_correction,
+        sigma_eps,
+        sigma_eps_estimated,
+        covariance: factor.report(),
+        posterior: post,
+        posterior_no_discrepancy: post_without,
+    })
+}
+
+/// `A g_u(x_i, θ)` and `b(x_i, θ)` at every experiment (`N_e x N_o` each; rows in parallel).
+pub fn model_rows<U, O>(p: &Problem<'_, U, O>, theta: &[f64]) -> Result<ModelRows>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    let (n_e, n_o) = (p.exps.len(), p.exps.y.ncols());
+    let per_row = (0..n_e)
+        .into_par_iter()
+        .map(|i| {
+            let x = p.x_row(i);
+            let mut g = vec![0.0; p.model.unobservable.response_len()];
+            let mut b = vec![0.0; n_o];
+            p.model.unobservable.evaluate(&x, theta, &mut g)?;
+            p.model.observable.offset(&x, theta, &mut b)?;
+            Ok((&p.parts.a * nalgebra::DVector::from_vec(g), b))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ModelRows {
+        theta: theta.to_vec(),
+        ag: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i].0[q]),
+        b: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i].1[q]),
+    })
+}
+
+/// Residuals of the Module-3 mean (Eq. 50) against the data at a candidate `θ`.
+pub struct ThetaResiduals<'a, 'p, U, O> {
+    /// The problem (model, data, `A`, `L`, `B`).
+    pub p: &'a Problem<'p, U, O>,
+    /// `ρ*`.
+    pub rho: f64,
+    /// `B μ_α(x_i)` per experiment (`N_e x N_o`) from the coefficient GPs.
+    pub shift: DMatrix<f64>,
+    /// The re-estimator of the coefficients at each `θ` (conditional mode), if any.
+    pub conditional: Option<&'a ConditionalCoefficients<'a>>,
+}
+
+impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O> {
+    /// Stacked residuals `y − E_o(θ)` with (Eq. 41/50) and without discrepancy (`ρ = 1`, `δ = 0`).
+    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (exps, bm) = (self.p.exps, &self.p.parts.b);
+        let (n_e, n_o) = (exps.len(), exps.y.ncols());
+        let ModelRows { ag, b, .. } = model_rows(self.p, theta)?;
+        let extra = match self.conditional {
+            None => None,
+            Some(c) => Some(c.smooth(&c.delta(self.rho, &ag, &b)?) * bm.transpose()),
+        };
+        let mut with = Vec::with_capacity(n_e * n_o);
+        let mut without = Vec::with_capacity(n_e * n_o);
+        for i in 0..n_e {
+            for q in 0..n_o {
+                let y = exps.y[(i, q)];
+                let shift = self.shift[(i, q)] + extra.as_ref().map_or(0.0, |e| e[(i, q)]);
+                with.push(y - (self.rho * ag[(i, q)] + b[(i, q)] + shift));
+                without.push(y - (ag[(i, q)] + b[(i, q)]));
+            }
+        }
+        Ok((with, without))
+    }
+
+    /// `E_θ[α̂(θ)] − α̂` over the posterior support ([`SupportPolicy::default`]).
+    fn posterior_mean_delta(
+        &self,
+        cc: &ConditionalCoefficients<'_>,
+        posterior: &ThetaPosterior,
+    ) -> Result<DMatrix<f64>> {
+        let parts = posterior
+            .support(&SupportPolicy::default())
+            .par_iter()
+            .map(|(theta, w)| {
+                let rows = model_rows(self.p, theta)?;
+                Ok(cc.delta(self.rho, &rows.ag, &rows.b)? * *w)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let zero = DMatrix::zeros(self.p.exps.len(), self.p.parts.b.ncols());
+        Ok(parts.into_iter().fold(zero, |acc, d| acc + d))
+    }
+}
+
+/// Everything the Module-3 log densities need.
+pub struct ThetaLikelihood<'a, 'p, U, O> {
+    /// The residual model.
+    pub res: ThetaResiduals<'a, 'p, U, O>,
+    /// Factored `V`.
+    pub factor: &'a FactoredCovariance,
+    /// `σ_ε²` for the no-discrepancy likelihood.
+    pub sigma2: f64,
+}
+
+impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
+    for ThetaLikelihood<'_, '_, U, O>
+{
+    /// Unnormalised log posteriors (with, without discrepancy) at `θ`; `-∞` outside the prior.
+    fn log_posteriors(&self, theta: &[f64]) -> Result<(f64, f64)> {
+        let lp = self.res.p.model.prior.ln_pdf(theta);
+        if !lp.is_finite() {
+            return Ok((f64::NEG_INFINITY, f64::NEG_INFINITY));
+        }
+        let (with, without) = self.res.residuals(theta)?;
+        Ok((
+            lp + self.factor.log_density(&with)?,
+            lp + iid_log_density(&without, self.sigma2),
+        ))
+    }
+}
