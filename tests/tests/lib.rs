@@ -8,7 +8,9 @@ mod beam_app;
 #[path = "e2e/invariants.rs"]
 mod invariants;
 
-use bamudi::{CalibrationParams, EstimatorParams, Experiments, RidgeParams, calibrate};
+use bamudi::{
+    CalibrationParams, CoefficientMode, EstimatorParams, Experiments, RidgeParams, calibrate,
+};
 use beam_app::*;
 use mlmodel::{LinearObservableModel, UnobservableModel};
 
@@ -161,11 +163,17 @@ fn check_calibration(
     );
 }
 
+/// The paper's Module 3 on the beam. This test was written for it and stays on it. In the
+/// default (marginal) mode the same data set gives the 95 % interval [15.33, 15.90] in with
+/// θ* = 15 (mean 2.3 sd off): measured when the default changed and left as a known miss of
+/// the marginal mode on this application (one data set cannot measure coverage; the coverage
+/// study on the gate does, and the beam has no such study yet).
 #[test]
 fn beam_calibration_with_the_exact_estimator_recovers_the_truth() {
     let model = beam_model(PRIOR_IN, TERMS);
     let exps = experiments(60, 1);
     let cfg = CalibrationParams::default()
+        .coefficients(CoefficientMode::PriorMarginal)
         .estimator(EstimatorParams::ExactLinear)
         .sigma_eps(Some(SIGMA_MICROSTRAIN))
         .theta_grid_points(101)

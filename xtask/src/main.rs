@@ -2,11 +2,15 @@
 //!
 //! * `reproduce-paper [--quick] [--json PATH] [--out DIR]`: both scenarios of the paper's Table 1
 //!   on the embedded default gate; writes `docs/results/reproduce-paper.md` and plots.
+//! * `coverage [--quick] [--estimator exact|lstm|ridge] [--replicates N] [--experiments N]
+//!   [--mesh IN] [--modes LIST] [--threads N] [--seed N] [--json PATH] [--out DIR]`: the
+//!   coverage study of the θ intervals and force bands; writes `docs/results/coverage*.md`.
 //! * `calculix-check [--element-size IN] [--dir DIR] [--ccx PATH] [--equation] [--report PATH]`:
 //!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
 //!   displacements (needs `ccx` on PATH; see docs/verification.md).
 
 mod calculix;
+mod coverage;
 mod plots;
 
 use anyhow::{Context, Result};
@@ -45,6 +49,9 @@ enum Task {
         #[arg(long)]
         sensitivity: bool,
     },
+    /// The coverage study: do the θ intervals and force bands hold the truth as often as they
+    /// claim? (simulation-based calibration over replicate data sets)
+    Coverage(coverage::CoverageArgs),
     /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
     CalculixCheck {
         /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
@@ -76,6 +83,7 @@ fn main() -> Result<()> {
             no_sensitivity,
             sensitivity,
         } => reproduce(quick, json, out, seed, no_sensitivity, sensitivity),
+        Task::Coverage(args) => coverage::run(&args),
         Task::CalculixCheck {
             element_size,
             dir,

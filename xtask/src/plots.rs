@@ -16,14 +16,14 @@ use plotters::prelude::*;
 use std::path::Path;
 
 /// One labelled polyline.
-struct Series {
+pub(crate) struct Series {
     label: String,
     color: RGBColor,
     points: Vec<(f64, f64)>,
     dashed: bool,
 }
 
-fn series(label: &str, color: RGBColor, xs: &[f64], ys: &[f64], dashed: bool) -> Series {
+pub(crate) fn series(label: &str, color: RGBColor, xs: &[f64], ys: &[f64], dashed: bool) -> Series {
     Series {
         label: label.into(),
         color,
@@ -32,7 +32,13 @@ fn series(label: &str, color: RGBColor, xs: &[f64], ys: &[f64], dashed: bool) ->
     }
 }
 
-fn line_plot(path: &Path, title: &str, xlabel: &str, ylabel: &str, all: &[Series]) -> Result<()> {
+pub(crate) fn line_plot(
+    path: &Path,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    all: &[Series],
+) -> Result<()> {
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for s in all {
         for &(x, y) in &s.points {

@@ -28,8 +28,9 @@
 //! The exact estimator's output noise `σ_t` is the gauges' white-noise sd, estimated from the
 //! rows of each calibration ([`estimated_gauge_noise_sd`]) unless set with
 //! [`GateCalibrator::gauge_noise_sd`]; with `σ_t = 0` the estimator turns noise into huge
-//! coefficients and the calibrated fit is worse than the noise. Module 3 conditions the
-//! coefficients on `θ` ([`CoefficientMode::ConditionalOnTheta`]): with the paper's
+//! coefficients and the calibrated fit is worse than the noise. Module 3 integrates the
+//! coefficients out ([`CoefficientMode::Marginal`], the engine's default): its `θ` intervals
+//! are the ones the coverage study checks (`docs/results/coverage-quick.md`); with the paper's
 //! prior-marginal coefficients a clean record is misfitted by several microstrain, which the
 //! loop would then try to explain.
 
@@ -59,7 +60,7 @@ pub struct GateCalibrator {
 impl GateCalibrator {
     /// A calibrator for the gate of `contact` with gap prior `Uniform(prior_in)` (in), the
     /// paper's 6 + 6 Legendre discrepancy terms (fewer when the gate has fewer representation
-    /// points), the exact linear estimator, the conditional coefficient mode, 241 `θ` grid
+    /// points), the exact linear estimator, the marginal coefficient mode, 241 `θ` grid
     /// points, and at most 240 rows per calibration.
     pub fn new(contact: ContactModel, prior_in: (f64, f64)) -> Result<Self> {
         let spec = MultiLevelSpec {
@@ -69,7 +70,7 @@ impl GateCalibrator {
         };
         let config = CalibrationParams::default()
             .estimator(EstimatorParams::ExactLinear)
-            .coefficients(CoefficientMode::ConditionalOnTheta)
+            .coefficients(CoefficientMode::Marginal)
             .theta_grid_points(241)
             .check()?;
         Ok(Self {
@@ -246,10 +247,9 @@ impl CalibratedGate {
         bamudi::Predictor<'_, mlmodel::Memo<mitergate::ContactForceModel>, mitergate::StrainModel>,
     > {
         let policy = SupportPolicy::default().max_nodes(LOOP_SUPPORT_NODES);
-        Ok(self
-            .cal
+        self.cal
             .predictor(self.model.as_ref())?
-            .support_policy(&policy))
+            .support_policy(&policy)
     }
 }
 

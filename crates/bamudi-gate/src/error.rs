@@ -33,6 +33,9 @@ pub enum GateAppError {
     /// levels and the gap).
     #[error("simulating the field record: {0}")]
     Simulation(String),
+    /// An option of a study or a command is invalid (the message names it).
+    #[error("invalid option: {0}")]
+    Option(String),
     /// (De)serialisation failed.
     #[error("{context}: {reason}")]
     Serde {

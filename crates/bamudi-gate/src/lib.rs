@@ -20,6 +20,7 @@
 pub struct ReadmeDoctest;
 
 pub mod calibrator;
+pub mod coverage;
 pub mod error;
 pub mod gate;
 pub mod paper;

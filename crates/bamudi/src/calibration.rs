@@ -12,8 +12,7 @@ use crate::module2::estimator::FittedEstimator;
 use crate::module2::gps::CoefficientGps;
 use crate::module2::training::LinearParts;
 use crate::module2::{self, Module2, Problem};
-use crate::module3::coefficients::strategy;
-use crate::module3::{self, Module3};
+use crate::module3::{self, Method, Module3, marginal};
 use crate::observe::{Event, Observer, Silent, Stage};
 use crate::params::CalibrationConfig;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
@@ -68,6 +67,9 @@ pub struct Calibration {
     module2: Module2,
     module3: Module3,
     timings: Timings,
+    /// The marginal mode's factorisation, rebuilt on first use by Module 4.
+    #[serde(skip)]
+    marginal_state: std::sync::OnceLock<std::sync::Arc<marginal::MarginalState>>,
 }
 
 /// Runs Modules 2-3 of BA-MUDI for a linear observable model with the default (silent)
@@ -216,13 +218,20 @@ impl<'a> Calibrate<'a> {
             alpha_hat,
             gps,
         };
-        let strategy = strategy::<U, O>(self.cfg.coefficients);
-        let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
-            module3::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
-        })?;
-        let m3 = self.stage(Stage::Module3, &mut t.module3_s, || {
-            module3::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
-        })?;
+        let m3 = match module3::method::<U, O>(self.cfg.coefficients) {
+            Method::Modular(strategy) => {
+                let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
+                    module3::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
+                })?;
+                self.stage(Stage::Module3, &mut t.module3_s, || {
+                    module3::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
+                })?
+            }
+            Method::Marginal => self.stage(Stage::Module3, &mut t.module3_s, || {
+                let sigma0 = marginal::initial_sigma(&p, &m2, &ctx)?;
+                marginal::posterior(&p, &m2, &ctx, sigma0)
+            })?,
+        };
         Ok(Calibration {
             config: self.cfg.clone(),
             signature: ModelSignature::of(p.model),
@@ -231,6 +240,7 @@ impl<'a> Calibrate<'a> {
             module2: m2,
             module3: m3,
             timings: t,
+            marginal_state: std::sync::OnceLock::new(),
         })
     }
 
@@ -336,6 +346,22 @@ impl Calibration {
             }
         }
         Ok((mean, var))
+    }
+
+    /// The marginal mode's factorisation for Module 4 (built on first use, then shared).
+    pub(crate) fn marginal_state(&self) -> Result<std::sync::Arc<marginal::MarginalState>> {
+        if let Some(s) = self.marginal_state.get() {
+            return Ok(s.clone());
+        }
+        let fit = self.module3.marginal.as_ref().ok_or_else(|| {
+            BamudiError::Calibration("no marginal-mode fit in this calibration".into())
+        })?;
+        let sigma2 = self.module3.sigma_eps.powi(2);
+        let state = marginal::MarginalState::new(fit, &self.x_experiments, &self.parts, sigma2)?;
+        Ok(self
+            .marginal_state
+            .get_or_init(|| std::sync::Arc::new(state))
+            .clone())
     }
 
     /// Checks that `model` is the one this calibration was fitted to.

@@ -36,6 +36,7 @@ pub mod module4;
 pub mod observe;
 mod optim;
 pub mod params;
+pub mod validation;
 
 /// The README's example, compiled and run as a doc test.
 #[doc = include_str!("../README.md")]
@@ -48,6 +49,7 @@ pub use error::{BamudiError, Result};
 pub use module3::posterior::{SupportPolicy, ThetaPosterior};
 pub use module4::{Band, Predictor};
 pub use params::{
-    CalibrationConfig, CalibrationParams, CoefficientMode, EstimatorParams, Marginalisation,
-    McmcConfig, RhoSearch, RidgeParams, SamplingRule,
+    CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode, CoefficientScales,
+    EstimatorParams, MarginalPrior, Marginalisation, McmcConfig, RhoSearch, RidgeParams,
+    SamplingRule,
 };

@@ -18,6 +18,7 @@
 
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
+use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState};
 use crate::module3::posterior::SupportPolicy;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
@@ -42,6 +43,23 @@ pub struct Predictor<'a, U, O> {
     cal: &'a Calibration,
     model: &'a MultiLevelModel<U, O>,
     support: Vec<(Vec<f64>, f64)>,
+    marginal: Option<MarginalView<'a>>,
+}
+
+/// The marginal mode's state and its support nodes (grouped to the support policy).
+struct MarginalView<'a> {
+    fit: &'a MarginalFit,
+    state: std::sync::Arc<MarginalState>,
+    nodes: Vec<MarginalNode>,
+}
+
+/// The coefficients' posterior at one input, per support point: mean and its derivative in
+/// `ρ` (`K` each), `ρ`'s mean and variance; and one covariance (`K x K`).
+struct CoefAt {
+    mean: Vec<DVector<f64>>,
+    slope: Vec<DVector<f64>>,
+    rho: Vec<(f64, f64)>,
+    cov: DMatrix<f64>,
 }
 
 impl Calibration {
@@ -57,19 +75,36 @@ impl Calibration {
         O: LinearObservableModel,
     {
         self.check_model(model)?;
-        Ok(Predictor {
+        let mut p = Predictor {
             cal: self,
             model,
-            support: self.module3().posterior.support(&SupportPolicy::default()),
-        })
+            support: Vec::new(),
+            marginal: None,
+        };
+        p.set_support(&SupportPolicy::default())?;
+        Ok(p)
     }
 }
 
 impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// Uses `policy` for the `θ` posterior's support points (fewer points: faster mixtures).
-    pub fn support_policy(mut self, policy: &SupportPolicy) -> Self {
-        self.support = self.cal.module3().posterior.support(policy);
-        self
+    pub fn support_policy(mut self, policy: &SupportPolicy) -> Result<Self> {
+        self.set_support(policy)?;
+        Ok(self)
+    }
+
+    fn set_support(&mut self, policy: &SupportPolicy) -> Result<()> {
+        let m3 = self.cal.module3();
+        match &m3.marginal {
+            None => self.support = m3.posterior.support(policy),
+            Some(fit) => {
+                let nodes = fit.grouped_nodes(policy.max_nodes);
+                self.support = nodes.iter().map(|n| (n.theta.clone(), n.weight)).collect();
+                let state = self.cal.marginal_state()?;
+                self.marginal = Some(MarginalView { fit, state, nodes });
+            }
+        }
+        Ok(())
     }
 
     /// The support points `(θ_j, w_j)` of the mixtures.
@@ -78,10 +113,14 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     }
 
     /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
-    /// `N x K` matrices), zero at rows where the response vanishes.
+    /// `N x K` matrices; the marginal mode's means are averaged over the `θ` posterior), zero
+    /// at rows where the response vanishes.
     pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
         self.check_x(x.ncols())?;
-        let (mut mean, mut var) = self.cal.alpha_moments(x)?;
+        let (mut mean, mut var) = match &self.marginal {
+            None => self.cal.alpha_moments(x)?,
+            Some(_) => self.marginal_alpha_moments(x)?,
+        };
         for i in 0..x.nrows() {
             let xi: Vec<f64> = x.row(i).iter().copied().collect();
             if self.model.unobservable.response_vanishes(&xi) {
@@ -94,32 +133,37 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     /// The corrected distributed response at `x` (Eq. 52; component blocked, length `C N_u`).
     pub fn response(&self, x: &[f64]) -> Result<Band> {
-        let (shift, gauss_sd) = self.projected_alpha(&self.cal.parts().l, x)?;
-        let rho = self.cal.rho_star();
-        let mut g = vec![0.0; self.cal.parts().l.nrows()];
-        self.theta_mixture(&gauss_sd, |theta| {
+        let at = self.coef_at(x)?;
+        let l = self.basis().0;
+        let mut g = vec![0.0; l.nrows()];
+        self.mixture(&at, l, |theta| {
             self.model.unobservable.evaluate(x, theta, &mut g)?;
-            Ok(g.iter()
-                .zip(shift.iter())
-                .map(|(g, s)| rho * g + s)
-                .collect())
+            Ok((DVector::from_column_slice(&g), DVector::zeros(g.len())))
         })
     }
 
     /// The noise-free observable outputs at `x` (Eq. 44); add `σ_ε²` for a new measurement.
     pub fn outputs(&self, x: &[f64]) -> Result<Band> {
-        let (shift, gauss_sd) = self.projected_alpha(&self.cal.parts().b, x)?;
-        self.theta_mixture(&gauss_sd, |theta| {
-            let m = self.model_outputs(x, theta)?;
-            Ok((0..m.len()).map(|q| m[q] + shift[q]).collect())
-        })
+        let at = self.coef_at(x)?;
+        self.mixture(&at, self.basis().1, |theta| self.model_parts(x, theta))
     }
 
-    /// The reconstructed discrepancy `L μ_α(x)` with a 95 % band `± 1.96 sd` from the GP
-    /// variances (Eq. 37; Fig. 15).
+    /// The reconstructed discrepancy `L μ_α(x)` (posterior-averaged in the marginal mode) with
+    /// a 95 % band `± 1.96 sd` from the coefficients' covariance (Eq. 37; Fig. 15).
     pub fn discrepancy(&self, x: &[f64]) -> Result<Band> {
-        let (shift, sd) = self.projected_alpha(&self.cal.parts().l, x)?;
-        let mean: Vec<f64> = shift.iter().copied().collect();
+        let at = self.coef_at(x)?;
+        let l = self.basis().0;
+        let w = self.weights();
+        let mu = at
+            .mean
+            .iter()
+            .zip(&w)
+            .fold(DVector::zeros(at.cov.nrows()), |acc, (m, w)| acc + m * *w);
+        let mean: Vec<f64> = (l * mu).iter().copied().collect();
+        let sd: Vec<f64> = projected_variance(l, &at.cov)
+            .into_iter()
+            .map(f64::sqrt)
+            .collect();
         let lower = mean
             .iter()
             .zip(&sd)
@@ -139,19 +183,17 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     }
 
     /// Mean and variance of the noise-free outputs at every row of `x` (`N x N_o` each): the
-    /// Eq.-44 mixture's moments (between-`θ` variance plus the GP part), without quantiles, for
-    /// many rows at once (rows in parallel).
+    /// Eq.-44 mixture's moments, without quantiles, for many rows at once (rows in parallel).
     pub fn output_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
-        let (mu, var_alpha) = self.alpha_moments(x)?;
-        let bm = &self.cal.parts().b;
+        self.check_x(x.ncols())?;
+        let bm = self.basis().1;
         let rows = (0..x.nrows())
             .into_par_iter()
             .map(|i| {
                 let xi: Vec<f64> = x.row(i).iter().copied().collect();
-                let shift = bm * mu.row(i).transpose();
-                let gauss_var = projected_variance(bm, var_alpha.row(i).iter().copied());
-                let comps = self.components(&xi, &shift)?;
-                Ok(mixture_moments(&comps, &self.weights(), &gauss_var))
+                let at = self.coef_at(&xi)?;
+                let comps = self.components(&at, bm, |theta| self.model_parts(&xi, theta))?;
+                Ok(mixture_moments(&comps, &self.weights()))
             })
             .collect::<Result<Vec<_>>>()?;
         let n_o = bm.nrows();
@@ -160,8 +202,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         Ok((mean, var))
     }
 
-    /// Eq. 50 at a given `θ` per row: `ρ* A g_u(x_i, θ_i) + b(x_i, θ_i) + B μ_α(x_i)`
-    /// (`N x N_o`; the coefficients' posterior-averaged shift is used at every `θ`).
+    /// Eq. 50 at a given `θ` per row: `ρ A g_u(x_i, θ_i) + b(x_i, θ_i) + B μ_α(x_i)`
+    /// (`N x N_o`; the coefficients' posterior-averaged mean and `ρ`'s posterior mean are
+    /// used at every `θ`).
     pub fn outputs_at_theta(&self, x: &DMatrix<f64>, theta: &[Vec<f64>]) -> Result<DMatrix<f64>> {
         if theta.len() != x.nrows() {
             return Err(BamudiError::dim(
@@ -171,40 +214,169 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             ));
         }
         let (mu, _) = self.alpha_moments(x)?;
-        let bm = &self.cal.parts().b;
+        let bm = self.basis().1;
+        let rho = self.cal.rho_star();
         let rows = (0..x.nrows())
             .into_par_iter()
             .map(|i| {
                 let xi: Vec<f64> = x.row(i).iter().copied().collect();
-                Ok(self.model_outputs(&xi, &theta[i])? + bm * mu.row(i).transpose())
+                let (ag, off) = self.model_parts(&xi, &theta[i])?;
+                Ok(ag * rho + off + bm * mu.row(i).transpose())
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(DMatrix::from_fn(x.nrows(), bm.nrows(), |i, q| rows[i][q]))
     }
 
-    /// `ρ* A g_u(x, θ) + b(x, θ)` (output units).
-    fn model_outputs(&self, x: &[f64], theta: &[f64]) -> Result<DVector<f64>> {
+    /// `A g_u(x, θ)` and `b(x, θ)` (output units).
+    fn model_parts(&self, x: &[f64], theta: &[f64]) -> Result<(DVector<f64>, DVector<f64>)> {
         let parts = self.cal.parts();
         let mut g = vec![0.0; parts.l.nrows()];
         let mut off = vec![0.0; parts.b.nrows()];
         self.model.unobservable.evaluate(x, theta, &mut g)?;
         self.model.observable.offset(x, theta, &mut off)?;
-        let ag = &parts.a * DVector::from_column_slice(&g);
-        let rho = self.cal.rho_star();
-        Ok(DVector::from_fn(parts.b.nrows(), |q, _| {
-            rho * ag[q] + off[q]
-        }))
+        Ok((
+            &parts.a * DVector::from_column_slice(&g),
+            DVector::from_vec(off),
+        ))
     }
 
-    /// The mixture components `ρ* A g_u(x, θ_j) + b(x, θ_j) + shift` at the support points.
-    fn components(&self, x: &[f64], shift: &DVector<f64>) -> Result<Vec<Vec<f64>>> {
+    /// The coefficients' posterior at `x` for every support point (zero where the response
+    /// vanishes).
+    fn coef_at(&self, x: &[f64]) -> Result<CoefAt> {
+        self.check_x(x.len())?;
+        let n = self.support.len();
+        let mut at = match &self.marginal {
+            None => {
+                let (mu, var) = self
+                    .cal
+                    .alpha_moments(&DMatrix::from_row_slice(1, x.len(), x))?;
+                let mean = mu.row(0).transpose();
+                CoefAt {
+                    slope: vec![DVector::zeros(mean.len()); n],
+                    rho: vec![(self.cal.rho_star(), 0.0); n],
+                    cov: DMatrix::from_diagonal(&var.row(0).transpose()),
+                    mean: vec![mean; n],
+                }
+            }
+            Some(view) => self.marginal_coef_at(view, x)?,
+        };
+        if self.model.unobservable.response_vanishes(x) {
+            at.mean
+                .iter_mut()
+                .chain(at.slope.iter_mut())
+                .for_each(|m| m.fill(0.0));
+            at.cov.fill(0.0);
+        }
+        Ok(at)
+    }
+
+    fn marginal_coef_at(&self, view: &MarginalView<'_>, x: &[f64]) -> Result<CoefAt> {
+        let ax = self.coefficient_scales(view.fit, x)?;
+        let cmat = view.fit.cross_cov(x, &ax, self.cal.x_experiments());
+        let (mut mean, mut slope, mut rho) = (vec![], vec![], vec![]);
+        for node in &view.nodes {
+            let (m, s) = view.fit.coefficient_mean(node, &cmat, node.rho_mean);
+            mean.push(m);
+            slope.push(s);
+            rho.push((node.rho_mean, node.rho_var));
+        }
+        let cov = view.state.coefficient_cov(view.fit, x, &ax, &cmat);
+        Ok(CoefAt {
+            mean,
+            slope,
+            rho,
+            cov,
+        })
+    }
+
+    /// The coefficients' prior scales `a_k(x)` of the marginal mode, by the rule Module 3 used
+    /// (zero where the response vanishes).
+    fn coefficient_scales(&self, fit: &MarginalFit, x: &[f64]) -> Result<Vec<f64>> {
+        if self.model.unobservable.response_vanishes(x) {
+            return Ok(vec![0.0; fit.priors.len()]);
+        }
+        let (cal, m2) = (self.cal, self.cal.module2());
+        let ctx = crate::module2::training::x_context(
+            self.model,
+            cal.parts(),
+            &m2.theta_rule,
+            &cal.config().sampling,
+            x,
+        )?;
+        Ok(crate::module3::marginal::prior_scales(
+            &ctx.alpha_half_width,
+            &self.model.basis,
+            cal.config().marginal.scales,
+        ))
+    }
+
+    /// The discrepancy basis `L` and `B` of the predictions: the marginal mode's supported
+    /// basis, otherwise the model's.
+    fn basis(&self) -> (&DMatrix<f64>, &DMatrix<f64>) {
+        match &self.marginal {
+            Some(view) => view.state.basis(),
+            None => (&self.cal.parts().l, &self.cal.parts().b),
+        }
+    }
+
+    /// The marginal mode's coefficient means (averaged over the nodes) and variances.
+    fn marginal_alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+        let k = self.basis().1.ncols();
+        let w = self.weights();
+        let rows = (0..x.nrows())
+            .into_par_iter()
+            .map(|i| {
+                let xi: Vec<f64> = x.row(i).iter().copied().collect();
+                let at = self.coef_at(&xi)?;
+                let mu = at
+                    .mean
+                    .iter()
+                    .zip(&w)
+                    .fold(DVector::zeros(k), |a, (m, w)| a + m * *w);
+                Ok((mu, at.cov.diagonal()))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let mean = DMatrix::from_fn(x.nrows(), k, |i, c| rows[i].0[c]);
+        let var = DMatrix::from_fn(x.nrows(), k, |i, c| rows[i].1[c]);
+        Ok((mean, var))
+    }
+
+    /// Mixture components at the support points: mean `ρ_j u_j + v_j + M μ_j` and variance
+    /// `diag(M Σ Mᵀ) + var(ρ_j) (u_j + M ∂μ_j/∂ρ)²`, where `(u_j, v_j) = parts(θ_j)` is the
+    /// model's response (times `ρ`) and offset at `θ_j`, and `M` is `L` or `B`.
+    fn components(
+        &self,
+        at: &CoefAt,
+        m: &DMatrix<f64>,
+        mut parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+    ) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
+        let gauss_var = projected_variance(m, &at.cov);
         self.support
             .iter()
-            .map(|(theta, _)| {
-                let m = self.model_outputs(x, theta)?;
-                Ok((0..m.len()).map(|q| m[q] + shift[q]).collect())
+            .enumerate()
+            .map(|(j, (theta, _))| {
+                let (u, v) = parts(theta)?;
+                let (rho, rho_var) = at.rho[j];
+                let shift = m * &at.mean[j];
+                let slope = &u + m * &at.slope[j];
+                let mean = (0..u.len()).map(|q| rho * u[q] + v[q] + shift[q]).collect();
+                let var = (0..u.len())
+                    .map(|q| gauss_var[q] + rho_var * slope[q] * slope[q])
+                    .collect();
+                Ok((mean, var))
             })
             .collect()
+    }
+
+    /// The band of the mixture of [`components`](Self::components).
+    fn mixture(
+        &self,
+        at: &CoefAt,
+        m: &DMatrix<f64>,
+        parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+    ) -> Result<Band> {
+        let comps = self.components(at, m, parts)?;
+        Ok(mixture_band(&comps, &self.weights()))
     }
 
     fn weights(&self) -> Vec<f64> {
@@ -218,77 +390,54 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         }
         Ok(())
     }
-
-    /// The coefficient moments at `x` projected through `m` (`L` or `B = A L`): the mean
-    /// `m μ_α(x)` and the per-row standard deviation `sqrt(diag(m Σ_α(x) mᵀ))`.
-    fn projected_alpha(&self, m: &DMatrix<f64>, x: &[f64]) -> Result<(DVector<f64>, Vec<f64>)> {
-        let (mu, var) = self.alpha_moments(&DMatrix::from_row_slice(1, x.len(), x))?;
-        let shift = m * mu.row(0).transpose();
-        let sd = projected_variance(m, var.row(0).iter().copied())
-            .into_iter()
-            .map(f64::sqrt)
-            .collect();
-        Ok((shift, sd))
-    }
-
-    /// The band of the mixture over the support whose component means are `component(θ_j)`,
-    /// with the common per-point Gaussian spread `gauss_sd`.
-    fn theta_mixture(
-        &self,
-        gauss_sd: &[f64],
-        mut component: impl FnMut(&[f64]) -> Result<Vec<f64>>,
-    ) -> Result<Band> {
-        let comp = self
-            .support
-            .iter()
-            .map(|(theta, _)| component(theta))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(mixture_band(&comp, &self.weights(), gauss_sd))
-    }
 }
 
-/// `diag(m diag(var) mᵀ)`: the variance of `m α` for independent coefficients.
-fn projected_variance(m: &DMatrix<f64>, var: impl Iterator<Item = f64> + Clone) -> Vec<f64> {
+/// `diag(m Σ mᵀ)`: the variance of `m α` for coefficients of covariance `Σ`.
+fn projected_variance(m: &DMatrix<f64>, cov: &DMatrix<f64>) -> Vec<f64> {
+    let diagonal = (0..cov.nrows()).all(|i| (0..cov.ncols()).all(|j| i == j || cov[(i, j)] == 0.0));
     (0..m.nrows())
         .map(|r| {
-            var.clone()
-                .enumerate()
-                .map(|(k, v)| m[(r, k)].powi(2) * v)
-                .sum::<f64>()
+            if diagonal {
+                (0..m.ncols())
+                    .map(|k| m[(r, k)].powi(2) * cov[(k, k)])
+                    .sum::<f64>()
+            } else {
+                let row = m.row(r);
+                (row * cov * row.transpose())[(0, 0)].max(0.0)
+            }
         })
         .collect()
 }
 
-/// Mean and variance per point of `Σ_j w_j N(comp_j, gauss_var)`.
-fn mixture_moments(comp: &[Vec<f64>], weights: &[f64], gauss_var: &[f64]) -> (Vec<f64>, Vec<f64>) {
-    let n = gauss_var.len();
+/// Mean and variance per point of the mixture `Σ_j w_j N(mean_j, var_j)`.
+fn mixture_moments(comps: &[(Vec<f64>, Vec<f64>)], weights: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let n = comps.first().map_or(0, |c| c.0.len());
     let mut mean = vec![0.0; n];
     let mut var = vec![0.0; n];
     for b in 0..n {
-        let ms: Vec<f64> = comp.iter().map(|c| c[b]).collect();
-        let m: f64 = ms.iter().zip(weights).map(|(v, w)| v * w).sum();
-        let between: f64 = ms
+        let m: f64 = comps.iter().zip(weights).map(|(c, w)| c.0[b] * w).sum();
+        let between: f64 = comps
             .iter()
             .zip(weights)
-            .map(|(v, w)| w * (v - m).powi(2))
+            .map(|(c, w)| w * (c.0[b] - m).powi(2))
             .sum();
+        let within: f64 = comps.iter().zip(weights).map(|(c, w)| w * c.1[b]).sum();
         mean[b] = m;
-        var[b] = between + gauss_var[b];
+        var[b] = between + within;
     }
     (mean, var)
 }
 
-/// A band from mixture component means (`n_comp x n_points`), weights and a common per-point
-/// Gaussian standard deviation.
-fn mixture_band(comp: &[Vec<f64>], weights: &[f64], gauss_sd: &[f64]) -> Band {
-    let gauss_var: Vec<f64> = gauss_sd.iter().map(|s| s.powi(2)).collect();
-    let (mean, var) = mixture_moments(comp, weights, &gauss_var);
-    let n = gauss_sd.len();
+/// A band from mixture components (mean and variance per point) and their weights.
+fn mixture_band(comps: &[(Vec<f64>, Vec<f64>)], weights: &[f64]) -> Band {
+    let (mean, var) = mixture_moments(comps, weights);
+    let n = mean.len();
     let (mut lower, mut upper) = (vec![0.0; n], vec![0.0; n]);
     for b in 0..n {
-        let ms: Vec<f64> = comp.iter().map(|c| c[b]).collect();
-        lower[b] = mixture_quantile(&ms, weights, gauss_sd[b], 0.025);
-        upper[b] = mixture_quantile(&ms, weights, gauss_sd[b], 0.975);
+        let ms: Vec<f64> = comps.iter().map(|c| c.0[b]).collect();
+        let sds: Vec<f64> = comps.iter().map(|c| c.1[b].sqrt()).collect();
+        lower[b] = mixture_quantile(&ms, weights, &sds, 0.025);
+        upper[b] = mixture_quantile(&ms, weights, &sds, 0.975);
     }
     Band {
         mean,
@@ -303,16 +452,19 @@ fn normal_cdf(z: f64) -> f64 {
     0.5 * statrs::function::erf::erfc(-z / std::f64::consts::SQRT_2)
 }
 
-/// Quantile `p` of the Gaussian mixture `Σ w_j N(m_j, s²)` by bisection.
-fn mixture_quantile(means: &[f64], weights: &[f64], s: f64, p: f64) -> f64 {
-    let s = s.max(1e-12 * (1.0 + means.iter().fold(0.0f64, |a, m| a.max(m.abs()))));
+/// Quantile `p` of the Gaussian mixture `Σ w_j N(m_j, s_j²)` by bisection.
+fn mixture_quantile(means: &[f64], weights: &[f64], sds: &[f64], p: f64) -> f64 {
+    let floor = 1e-12 * (1.0 + means.iter().fold(0.0f64, |a, m| a.max(m.abs())));
+    let sds: Vec<f64> = sds.iter().map(|s| s.max(floor)).collect();
     let cdf = |v: f64| -> f64 {
         means
             .iter()
             .zip(weights)
-            .map(|(m, w)| w * normal_cdf((v - m) / s))
+            .zip(&sds)
+            .map(|((m, w), s)| w * normal_cdf((v - m) / s))
             .sum()
     };
+    let s = sds.iter().copied().fold(0.0f64, f64::max);
     let lo0 = means.iter().copied().fold(f64::INFINITY, f64::min) - 10.0 * s;
     let hi0 = means.iter().copied().fold(f64::NEG_INFINITY, f64::max) + 10.0 * s;
     let (mut lo, mut hi) = (lo0, hi0);
@@ -336,7 +488,7 @@ mod tests {
 
     #[test]
     fn mixture_of_one_component_is_the_normal_band() {
-        let band = mixture_band(&[vec![1.0]], &[1.0], &[2.0]);
+        let band = mixture_band(&[(vec![1.0], vec![4.0])], &[1.0]);
         // ±1.959964 sd; bisection to 1e-12 relative
         assert!((band.upper[0] - (1.0 + 2.0 * 1.959_964)).abs() < 1e-5);
         assert!((band.lower[0] - (1.0 - 2.0 * 1.959_964)).abs() < 1e-5);
@@ -346,7 +498,10 @@ mod tests {
     #[test]
     fn mixture_variance_is_within_plus_between() {
         // two equal components at ±1 with unit spread: variance 1 + 1
-        let (m, v) = mixture_moments(&[vec![-1.0], vec![1.0]], &[0.5, 0.5], &[1.0]);
+        let (m, v) = mixture_moments(
+            &[(vec![-1.0], vec![1.0]), (vec![1.0], vec![1.0])],
+            &[0.5, 0.5],
+        );
         assert!(m[0].abs() < 1e-15 && (v[0] - 2.0).abs() < 1e-15);
     }
 }

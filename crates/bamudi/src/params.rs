@@ -318,7 +318,6 @@ pub enum CoefficientMode {
     /// between the prior-averaged response and the response at the true `θ`, which pulls the
     /// posterior towards the `θ` whose response equals the prior average (see
     /// `docs/equations.md`, "Module 3 coefficient modes").
-    #[default]
     PriorMarginal,
     /// Not in the paper: at each `θ` the estimator of Eq. 29 is re-applied to the observations
     /// shifted to what the prior-averaged model would have produced,
@@ -326,6 +325,65 @@ pub enum CoefficientMode {
     /// on these `α̂(θ)` with their hyper-parameters held (a linear smoother). `θ` is then judged
     /// by what a smooth discrepancy cannot explain at that `θ`.
     ConditionalOnTheta,
+    /// Not in the paper: the coefficient functions integrated out under a Gaussian-process
+    /// prior with Module 2's kernels (the Kennedy-O'Hagan treatment), `ρ` integrated over its
+    /// uniform prior, `σ_ε` and the prior's amplitude by type-II maximum likelihood; Module 4
+    /// carries `θ`, `ρ` and every coefficient direction (see [`crate::module3::marginal`]).
+    /// The default: its intervals are the ones the coverage study checks.
+    #[default]
+    Marginal,
+}
+
+/// The prior of the discrepancy coefficients in the marginal mode
+/// ([`CoefficientMode::Marginal`]; TOML section `[marginal]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MarginalPrior {
+    /// How each coefficient function's prior scale follows from the sampling rule's ranges.
+    pub scales: CoefficientScales,
+    /// Zero the discrepancy where the unobservable model says the response vanishes at `θ`
+    /// ([`mlmodel::UnobservableModel::discrepancy_support`]; for the gate, in the gap).
+    pub mask_outside_support: bool,
+    /// The correlation family of the coefficient functions over the inputs.
+    pub kernel: CoefficientKernel,
+}
+
+/// The correlation family of the marginal mode's coefficient functions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoefficientKernel {
+    /// Module 2's kernel (the squared exponential unless configured otherwise).
+    Module2,
+    /// Matérn ν = 5/2 with Module 2's length scales (then scaled by the fitted factor): the
+    /// default, because a discrepancy's shape across conditions is not known to be infinitely
+    /// smooth, and the squared exponential's certainty about it made `θ` over-confident in the
+    /// coverage study (the alternative the paper names after Eq. 34).
+    #[default]
+    Matern52,
+}
+
+impl Default for MarginalPrior {
+    fn default() -> Self {
+        Self {
+            scales: CoefficientScales::SharedPerComponent,
+            mask_outside_support: true,
+            kernel: CoefficientKernel::Matern52,
+        }
+    }
+}
+
+/// The prior scale of each discrepancy coefficient function in the marginal mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoefficientScales {
+    /// Each coefficient its own sampling-rule range `h_k(x)/√3`: the shape of the nominal
+    /// response decides which polynomial orders the discrepancy may use.
+    PerCoefficient,
+    /// Every coefficient of a response component the largest range of that component at `x`:
+    /// no polynomial order is presumed smaller than another (the discrepancy's shape is
+    /// unknown), while the size still follows the nominal response.
+    #[default]
+    SharedPerComponent,
 }
 
 /// Everything a calibration needs besides the model and the data, as a user writes it (TOML
@@ -367,8 +425,10 @@ pub struct CalibrationParams {
     pub sigma_eps: Option<f64>,
     /// MCMC settings (for `dim θ > 1`).
     pub mcmc: McmcConfig,
-    /// How Module 3 sets the discrepancy coefficients at each `θ` (default: the paper's).
+    /// How Module 3 sets the discrepancy coefficients at each `θ` (default: marginal).
     pub coefficients: CoefficientMode,
+    /// The coefficients' prior in the marginal mode.
+    pub marginal: MarginalPrior,
     /// Master seed; every random step derives its seed from it.
     pub seed: u64,
     /// Worker threads (`None`: rayon's default). The engine does not start threads of its own;
@@ -388,7 +448,8 @@ impl Default for CalibrationParams {
             gp_restarts: 3,
             sigma_eps: None,
             mcmc: McmcConfig::default(),
-            coefficients: CoefficientMode::PriorMarginal,
+            coefficients: CoefficientMode::Marginal,
+            marginal: MarginalPrior::default(),
             seed: 2021,
             threads: None,
         }
@@ -453,6 +514,8 @@ impl CalibrationParams {
         mcmc: McmcConfig, "bamudi::McmcConfig::default()");
     setter!(/// Sets how Module 3 treats the discrepancy coefficients at each `θ`.
         coefficients: CoefficientMode, "bamudi::CoefficientMode::ConditionalOnTheta");
+    setter!(/// Sets the coefficients' prior of the marginal mode.
+        marginal: MarginalPrior, "bamudi::MarginalPrior { scales: bamudi::CoefficientScales::PerCoefficient, ..Default::default() }");
     setter!(/// Sets the master seed.
         seed: u64, "42");
     setter!(/// Sets the thread count.

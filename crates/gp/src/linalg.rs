@@ -38,6 +38,11 @@ pub(crate) fn cholesky_with_jitter(
                 expected,
                 found: got,
             },
+            // (the Cholesky kernel never iterates; mapped for completeness)
+            NumericsError::NoConvergence { what } => GpError::OptimizationFailed {
+                starts: 0,
+                last: format!("{what}: did not converge"),
+            },
             // (the in-place kernel does not scan for non-finite entries; mapped for completeness)
             NumericsError::NonFinite { index, .. } => {
                 let (row, col) = (index % n, index / n);

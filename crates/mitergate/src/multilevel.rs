@@ -155,6 +155,11 @@ impl UnobservableModel for ContactForceModel {
     fn response_vanishes(&self, x: &[f64]) -> bool {
         x.len() == 2 && gate_open([x[0], x[1]])
     }
+    /// The contact coverage of each quoin point ([`ContactModel::coverage`]): a discrepancy
+    /// of the contact force acts where there is contact, not in the gap below `θ`.
+    fn discrepancy_support(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        theta.first().map(|t| self.contact.coverage(*t))
+    }
     fn evaluate(&self, x: &[f64], theta: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
         check_domain(x, theta, self.contact.gate().quoin_height)?;
         check_len("out", out, self.response_len())?;

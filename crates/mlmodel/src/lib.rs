@@ -150,6 +150,16 @@ pub trait UnobservableModel: Send + Sync {
         false
     }
 
+    /// Weights in `[0, 1]` per response point (`N_u` of them) of where a discrepancy can act
+    /// at `θ`, or `None` for everywhere (the default). Where the response is zero by
+    /// construction at this `θ` (for the gate: the gap below `θ` carries no contact force), so
+    /// is any correction of it. The marginal coefficient mode of `bamudi` multiplies the
+    /// discrepancy basis by these weights, which makes it depend on `θ`.
+    fn discrepancy_support(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        let _ = theta;
+        None
+    }
+
     /// Number of inputs `x`.
     fn input_dim(&self) -> usize {
         self.input_names().len()

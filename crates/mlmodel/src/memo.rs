@@ -103,6 +103,9 @@ impl<U: UnobservableModel> UnobservableModel for Memo<U> {
     fn response_vanishes(&self, x: &[f64]) -> bool {
         self.inner.response_vanishes(x)
     }
+    fn discrepancy_support(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        self.inner.discrepancy_support(theta)
+    }
     fn evaluate(&self, x: &[f64], theta: &[f64], out: &mut [f64]) -> Result<()> {
         if self.capacity == 0 {
             return self.inner.evaluate(x, theta, out);

@@ -34,4 +34,10 @@ pub enum NumericsError {
         /// Flat index of the first non-finite value.
         index: usize,
     },
+    /// An iterative kernel did not converge.
+    #[error("{what}: did not converge")]
+    NoConvergence {
+        /// What was computed.
+        what: String,
+    },
 }

@@ -20,11 +20,13 @@
 pub struct ReadmeDoctest;
 
 pub mod cholesky;
+pub mod eigen;
 mod error;
 pub mod random;
 pub mod robust;
 pub mod standardize;
 
 pub use cholesky::{Cholesky, JITTER_LADDER};
+pub use eigen::SymmetricEigen;
 pub use error::NumericsError;
 pub use standardize::Standardizer;

@@ -3,12 +3,16 @@
 //! model and the synthetic truth (120 experiments per scenario) to Modules 2-4 (exact linear
 //! estimator), scored against the truth.
 //!
-//! What is asserted is what the method delivers on our gate. Three of issue 7's acceptance
-//! criteria are NOT met and are therefore not asserted (see docs/results/reproduce-paper.md):
-//! ρ is not identified by Eq. 30 (ρ* runs to the search bound, because 12 discrepancy
-//! coefficients can absorb `(0.8 − ρ) g` through only 7 gauges), and as a consequence the θ
-//! interval is over-confident and the force field is not corrected. This test prints those
-//! numbers so a change that fixes or worsens them is visible.
+//! What is asserted is what the method delivers on our gate, in a form the prior would fail:
+//! the default (marginal) mode must learn θ (posterior sd under 1/20 of the prior's) and land
+//! within four of its own sd of θ*, learn ρ (its interval of ±4 sd holds 0.8 and excludes the
+//! prior mean), and correct the force field (normal-force RMSE after at most 1/5 of before).
+//! The reconstructed discrepancy is printed, not asserted (only `ρ g + δ` is identified). The paper's
+//! Module 3 is only required to explain the strains: its ρ* is not identified by Eq. 30 (it
+//! runs to the search bound, because 12 coefficients absorb `(0.8 − ρ) g` through 7 gauges),
+//! so its θ interval misses θ* and the force field is not corrected (see
+//! docs/results/reproduce-paper.md). Whether intervals hold θ* at their nominal rate is the
+//! coverage study's question (one data set cannot answer it).
 
 use bamudi::observe::Silent;
 use bamudi_gate::paper::{ReproduceOptions, reproduce};
@@ -69,7 +73,6 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             s.name,
             t.mean
         );
-        assert!(s.rho_star >= 0.0 && s.rho_star <= 1.0);
         // The conditional-coefficient variant (not in the paper): θ judged by what a smooth
         // discrepancy cannot explain at that θ. Issue 7's paper-size criterion, 3 in, applies.
         let c = s
@@ -103,5 +106,60 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             t.mean
         );
         assert!(c.strain_rmse.with_discrepancy < s.discrepancy_strain_rms);
+        check_marginal(s);
     }
+}
+
+/// The default mode: θ and ρ learnt and near the truth, the force corrected, δ reconstructed.
+fn check_marginal(s: &bamudi_gate::paper::ScenarioResult) {
+    let m = s
+        .marginal
+        .as_ref()
+        .expect("quick options run the default mode");
+    let t = &m.theta_posterior;
+    let d = &m.discrepancy;
+    eprintln!(
+        "{} marginal: rho {:.3} ± {:.3}, theta {:.2} ± {:.2} [{:.2}, {:.2}]; normal RMSE {:.1} -> {:.1}; \
+         δ̂ RMSE {:.1} (true δ RMS {:.1}), band {:.2}/{:.2}",
+        s.name,
+        m.rho_star,
+        m.rho_sd.unwrap_or(f64::NAN),
+        t.mean,
+        t.sd,
+        t.ci95.0,
+        t.ci95.1,
+        m.force_rmse.normal_before,
+        m.force_rmse.normal_after,
+        d.normal_rmse,
+        d.normal_true_rms,
+        d.normal_band_coverage,
+        d.tangential_band_coverage
+    );
+    // Both scenarios' priors are 60 in wide uniform windows (sd 17.3 in): a posterior that
+    // did not learn from the data keeps that sd.
+    let prior_sd = 60.0 / 12f64.sqrt();
+    assert!(t.sd < prior_sd / 20.0, "{}: θ sd {}", s.name, t.sd);
+    // Four posterior sd: the coverage study measures z rms 1.1-1.5 for this mode, so a
+    // correct posterior exceeds 4 sd with negligible probability; a bias of the paper's
+    // Module 3 size (15-17 sd) fails.
+    assert!(
+        (t.mean - s.theta_true).abs() < 4.0 * t.sd,
+        "{}: θ {} ± {} vs θ* {}",
+        s.name,
+        t.mean,
+        t.sd,
+        s.theta_true
+    );
+    // ρ: truth 0.8; the ρ prior is uniform on the sampling rule's range, whose mean is not 0.8.
+    let rho_sd = m.rho_sd.expect("the marginal mode reports ρ's sd");
+    assert!(
+        (m.rho_star - 0.8).abs() < 4.0 * rho_sd,
+        "{}: ρ {} ± {}",
+        s.name,
+        m.rho_star,
+        rho_sd
+    );
+    assert!(m.force_rmse.normal_after <= 0.2 * m.force_rmse.normal_before);
+    // δ̂ itself is reported, not asserted: the paper's δ is nearly proportional to g, so only
+    // ρ g + δ is identified and δ̂ moves with ρ's posterior (see the module docs).
 }

@@ -2,11 +2,12 @@
 
 use super::{ForceRmse, StrainRmse};
 use crate::error::Result;
-use bamudi::{Calibration, SupportPolicy};
+use bamudi::{Band, Calibration, SupportPolicy};
 use mitergate::data::truth::{self, Scenario};
 use mitergate::{ContactModel, GateMultiLevel};
 use mlmodel::{LinearObservableModel, ObservableModel, UnobservableModel};
 use nalgebra::DVector;
+use serde::{Deserialize, Serialize};
 
 pub(super) fn rms(values: impl Iterator<Item = f64>) -> f64 {
     let (mut ss, mut n) = (0.0, 0usize);
@@ -18,7 +19,7 @@ pub(super) fn rms(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// Prior-averaged response `Σ_j w_j g_u(x, θ_j)` (Eq. 2), the "before calibration" model.
-fn prior_mean_response(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
+pub(crate) fn prior_mean_response(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
     let rule = model.prior.quadrature(8)?;
     weighted_response(model, x, rule.nodes.iter().map(|t| t[0]).zip(rule.weights))
 }
@@ -54,6 +55,93 @@ fn no_discrepancy_strain(model: &GateMultiLevel, cal: &Calibration, x: &[f64]) -
 pub(super) struct Scores {
     pub(super) force: ForceRmse,
     pub(super) strain: StrainRmse,
+    pub(super) discrepancy: DiscrepancyScore,
+}
+
+/// The reconstructed discrepancy `δ̂ = L μ_α` against the true one (`f* − ρ* g(x, θ*)`, the
+/// part of the true force the model's response does not carry) at the new conditions.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct DiscrepancyScore {
+    /// RMS of the true normal discrepancy (lbf/in).
+    pub normal_true_rms: f64,
+    /// RMSE of `δ̂` against it, normal (lbf/in).
+    pub normal_rmse: f64,
+    /// RMS of the true tangential discrepancy (lbf/in).
+    pub tangential_true_rms: f64,
+    /// RMSE of `δ̂`, tangential (lbf/in).
+    pub tangential_rmse: f64,
+    /// Fraction of (condition, quoin point) pairs whose true normal discrepancy lies in the
+    /// 95 % band of `δ̂` (pairs where both are identically zero, in the gap, left out).
+    pub normal_band_coverage: f64,
+    /// The same, tangential.
+    pub tangential_band_coverage: f64,
+}
+
+/// Accumulates `(true, band)` pairs of one component.
+#[derive(Default)]
+struct DeltaTally {
+    truth_sq: Vec<f64>,
+    err: Vec<f64>,
+    inside: usize,
+    counted: usize,
+}
+
+impl DeltaTally {
+    fn add(&mut self, truth: f64, band: &Band, b: usize) {
+        self.truth_sq.push(truth);
+        self.err.push(band.mean[b] - truth);
+        if truth == 0.0 && band.sd[b] == 0.0 {
+            return;
+        }
+        self.counted += 1;
+        if (band.lower[b]..=band.upper[b]).contains(&truth) {
+            self.inside += 1;
+        }
+    }
+
+    /// `(true rms, rmse, band coverage)`.
+    fn summary(self) -> (f64, f64, f64) {
+        let cov = self.inside as f64 / self.counted.max(1) as f64;
+        (
+            rms(self.truth_sq.into_iter()),
+            rms(self.err.into_iter()),
+            cov,
+        )
+    }
+}
+
+/// `δ̂` against the true discrepancy at `new_x`.
+fn discrepancy_score<U, O>(
+    predictor: &bamudi::Predictor<'_, U, O>,
+    scenario: &Scenario,
+    contact: &ContactModel,
+    new_x: &[[f64; 2]],
+) -> Result<DiscrepancyScore>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    let nu = contact.gate().n_points();
+    let no_delta = scenario.clone().discrepancy_scale(0.0);
+    let (mut n, mut t) = (DeltaTally::default(), DeltaTally::default());
+    for x in new_x {
+        let with = truth::true_forces(scenario, contact, *x)?;
+        let without = truth::true_forces(&no_delta, contact, *x)?;
+        let band = predictor.discrepancy(x)?;
+        for b in 0..2 * nu {
+            let tally = if b < nu { &mut n } else { &mut t };
+            tally.add(with[b] - without[b], &band, b);
+        }
+    }
+    let ((nt, ne, nc), (tt, te, tc)) = (n.summary(), t.summary());
+    Ok(DiscrepancyScore {
+        normal_true_rms: nt,
+        normal_rmse: ne,
+        tangential_true_rms: tt,
+        tangential_rmse: te,
+        normal_band_coverage: nc,
+        tangential_band_coverage: tc,
+    })
 }
 
 /// Force RMSE before/after and strain RMSE with/without the discrepancy at `new_x`.
@@ -101,5 +189,6 @@ pub(super) fn score(
             with_discrepancy: rms(ds_w.into_iter()),
             without_discrepancy: rms(ds_wo.into_iter()),
         },
+        discrepancy: discrepancy_score(&predictor, scenario, contact, new_x)?,
     })
 }

@@ -93,6 +93,7 @@ pub(super) fn study(
                 .check()?;
             let cal = calibrate(&model, &sub, &cfg)?;
             let what = match mode {
+                CoefficientMode::Marginal => "marginal coefficients",
                 CoefficientMode::PriorMarginal => "paper's Module 3",
                 CoefficientMode::ConditionalOnTheta => "conditional coefficients",
             };

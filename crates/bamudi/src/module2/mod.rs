@@ -6,6 +6,7 @@
 //! coefficient (Eq. 33-37, [`gps`]). Each step is a function of a [`Problem`]; the executor in
 //! [`crate::calibration`] runs them in order, times them and collects a [`Module2`].
 
+pub mod accuracy;
 pub mod estimator;
 pub mod gps;
 pub mod rho;

@@ -63,8 +63,9 @@ where
     O: LinearObservableModel,
 {
     match mode {
-        CoefficientMode::PriorMarginal => Box::new(PriorMarginal),
         CoefficientMode::ConditionalOnTheta => Box::new(ConditionalOnTheta),
+        // the marginal mode has no strategy of its own ([`super::method`] routes it apart)
+        CoefficientMode::PriorMarginal | CoefficientMode::Marginal => Box::new(PriorMarginal),
     }
 }
 

@@ -84,7 +84,9 @@ fn evaluate_nodes(
 /// its maximum, i.e. relative density > 1e-13, padded to the neighbouring nodes), until
 /// every posterior's mass region holds at least [`MIN_LIVE_NODES`] nodes or the node budget
 /// is spent. Posteriors are often orders of magnitude narrower than the prior; the zoom puts
-/// the nodes where the integrand lives, and the trapezoid rule handles the uneven spacing.
+/// the nodes where the integrand lives; the log density is then interpolated by local
+/// quadratics onto [`SUBDIVISIONS`] sub-intervals per interval and integrated by the trapezoid
+/// rule ([`GridPosterior::interpolated`]).
 fn grid_posteriors(
     lp: &dyn LogPosteriors,
     (lo, hi): (f64, f64),
@@ -120,11 +122,17 @@ fn grid_posteriors(
     let theta: Vec<f64> = all.iter().map(|a| a.0).collect();
     let with = all.iter().map(|a| a.1.0).collect();
     let without = all.iter().map(|a| a.1.1).collect();
+    let with: Vec<f64> = with;
+    let without: Vec<f64> = without;
     Ok((
-        ThetaPosterior::Grid(GridPosterior::new(theta.clone(), with)?),
-        ThetaPosterior::Grid(GridPosterior::new(theta, without)?),
+        ThetaPosterior::Grid(GridPosterior::interpolated(&theta, &with, SUBDIVISIONS)?),
+        ThetaPosterior::Grid(GridPosterior::interpolated(&theta, &without, SUBDIVISIONS)?),
     ))
 }
+
+/// Sub-intervals per evaluated interval on which the log density is interpolated
+/// ([`GridPosterior::interpolated`]).
+pub const SUBDIVISIONS: usize = 8;
 
 /// Grid nodes a posterior's mass region must hold before the zoom stops refining it.
 pub const MIN_LIVE_NODES: usize = 12;

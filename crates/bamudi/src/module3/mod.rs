@@ -10,6 +10,7 @@ pub mod coefficients;
 pub mod conditional;
 pub mod grid;
 pub mod likelihood;
+pub mod marginal;
 pub mod mcmc;
 pub mod posterior;
 
@@ -50,6 +51,32 @@ pub struct Module3 {
     pub posterior: ThetaPosterior,
     /// Posterior of `θ` without discrepancy (`ρ = 1`, `δ = 0`, `V = σ_ε² I`; Fig. 16).
     pub posterior_no_discrepancy: ThetaPosterior,
+    /// The marginal mode's fit (coefficient priors, amplitude, `ρ`'s posterior, the support
+    /// points Module 4 uses).
+    #[serde(default)]
+    pub marginal: Option<marginal::MarginalFit>,
+}
+
+/// How Module 3 treats the discrepancy coefficients: through a [`CoefficientStrategy`] on
+/// Module 2's estimates (the paper's mode and the conditional one), or integrated out
+/// ([`marginal`]).
+pub enum Method<U, O> {
+    /// Module 2's coefficient GPs, adapted by the strategy.
+    Modular(Box<dyn CoefficientStrategy<U, O>>),
+    /// The coefficients integrated out under their GP prior.
+    Marginal,
+}
+
+/// The method of a coefficient mode.
+pub fn method<U, O>(mode: crate::params::CoefficientMode) -> Method<U, O>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    match mode {
+        crate::params::CoefficientMode::Marginal => Method::Marginal,
+        other => Method::Modular(coefficients::strategy(other)),
+    }
 }
 
 /// Module 3, first part: the strategy adapts Module 2's coefficients (the conditional mode's
@@ -125,6 +152,7 @@ where
         covariance: factor.report(),
         posterior: post,
         posterior_no_discrepancy: post_without,
+        marginal: None,
     })
 }
 

@@ -38,6 +38,26 @@ impl ThetaPosterior {
             Self::Mcmc(m) => m.ci95.clone(),
         }
     }
+    /// Posterior probability that component `j` of `θ` is at most `t`: the grid CDF with
+    /// linear interpolation between nodes, or the fraction of MCMC draws at or below `t`.
+    /// This is the probability integral transform a coverage study ranks the truth by.
+    ///
+    /// ```
+    /// use bamudi::module3::posterior::{GridPosterior, ThetaPosterior};
+    /// let post = ThetaPosterior::Grid(GridPosterior::new(vec![0.0, 1.0, 2.0], vec![0.0; 3]).unwrap());
+    /// assert_eq!(post.cdf(0, 1.0), 0.5);
+    /// assert_eq!((post.cdf(0, -1.0), post.cdf(0, 3.0)), (0.0, 1.0));
+    /// ```
+    pub fn cdf(&self, j: usize, t: f64) -> f64 {
+        match self {
+            Self::Grid(g) => g.cdf_at(t),
+            Self::Mcmc(m) => {
+                let all: Vec<f64> = m.chains.iter().flatten().map(|p| p[j]).collect();
+                all.iter().filter(|v| **v <= t).count() as f64 / all.len().max(1) as f64
+            }
+        }
+    }
+
     /// Weighted support points of the posterior under `policy` (see [`SupportPolicy`]); the
     /// weights sum to one.
     pub fn support(&self, policy: &SupportPolicy) -> Vec<(Vec<f64>, f64)> {
@@ -274,6 +294,93 @@ impl GridPosterior {
             map,
             ci95,
         })
+    }
+
+    /// The CDF at `t`, linear between nodes (the trapezoid CDF is exact at the nodes), 0
+    /// below the grid and 1 above it.
+    pub fn cdf_at(&self, t: f64) -> f64 {
+        let n = self.theta.len();
+        let i = self.theta.partition_point(|v| *v <= t);
+        if i == 0 {
+            return 0.0;
+        }
+        if i == n {
+            return 1.0;
+        }
+        let (t0, t1) = (self.theta[i - 1], self.theta[i]);
+        let w = (t - t0) / (t1 - t0);
+        self.cdf[i - 1] + w * (self.cdf[i] - self.cdf[i - 1])
+    }
+
+    /// The posterior of log densities evaluated at `theta` (increasing, at least 3 nodes),
+    /// with the log density interpolated onto `sub` equal sub-intervals of every interval
+    /// before normalising. Between nodes `t_i` and `t_{i+1}` the interpolant blends the
+    /// quadratics through `(t_{i-1}, t_i, t_{i+1})` and `(t_i, t_{i+1}, t_{i+2})` linearly:
+    /// it reproduces a quadratic log density (a Gaussian posterior) exactly, so a posterior
+    /// whose mass spans only a dozen evaluated nodes is integrated accurately. What it fixes is
+    /// the CDF between nodes, which sets the interval ends and `P(θ ≤ θ*)`: at a node spacing
+    /// of 1.3 sd the straight-line CDF between nodes is off by 0.046 half-way between them. The interpolant never exceeds the larger end of its interval by
+    /// more than 1 (bounding the overshoot of a quadratic across a kink).
+    ///
+    /// ```
+    /// use bamudi::module3::posterior::GridPosterior;
+    /// // a unit Gaussian seen at a spacing of 1.3 sd
+    /// let theta: Vec<f64> = (0..13).map(|i| -7.8 + 1.3 * i as f64).collect();
+    /// let logp: Vec<f64> = theta.iter().map(|t| -0.5 * (t - 0.3) * (t - 0.3)).collect();
+    /// let coarse = GridPosterior::new(theta.clone(), logp.clone()).unwrap();
+    /// let fine = GridPosterior::interpolated(&theta, &logp, 8).unwrap();
+    /// let t = 0.3 + 0.65; // half-way between two nodes; the true CDF there is Φ(0.65) = 0.7422
+    /// assert!((fine.cdf_at(t) - 0.7422).abs() < 0.003); // measured 0.7413
+    /// assert!((coarse.cdf_at(t) - 0.7422).abs() > 0.03); // measured 0.6960
+    /// assert!((fine.sd - 1.0).abs() < 1e-6);
+    /// assert!((fine.mean - 0.3).abs() < 1e-3);
+    /// ```
+    pub fn interpolated(theta: &[f64], log_density: &[f64], sub: usize) -> Result<Self> {
+        let n = theta.len();
+        if n < 3 || log_density.len() != n || sub <= 1 {
+            return Self::new(theta.to_vec(), log_density.to_vec());
+        }
+        let quad = |c: usize, t: f64| -> f64 {
+            // the quadratic through nodes c-1, c, c+1 at t
+            let (x, y) = (&theta[c - 1..=c + 1], &log_density[c - 1..=c + 1]);
+            (0..3)
+                .map(|j| {
+                    let others = (0..3).filter(|&k| k != j);
+                    y[j] * others.map(|k| (t - x[k]) / (x[j] - x[k])).product::<f64>()
+                })
+                .sum()
+        };
+        let (mut t_out, mut l_out) = (Vec::with_capacity(n * sub), Vec::with_capacity(n * sub));
+        for i in 0..n - 1 {
+            let (a, b) = (theta[i], theta[i + 1]);
+            let (la, lb) = (log_density[i], log_density[i + 1]);
+            t_out.push(a);
+            l_out.push(la);
+            if !(la.is_finite() && lb.is_finite()) {
+                continue;
+            }
+            let cap = la.max(lb) + 1.0;
+            for k in 1..sub {
+                let w = k as f64 / sub as f64;
+                let t = a + w * (b - a);
+                let left = (i >= 1 && log_density[i - 1].is_finite()).then(|| quad(i, t));
+                let right = (i + 2 < n && log_density[i + 2].is_finite()).then(|| quad(i + 1, t));
+                let l = match (left, right) {
+                    (Some(p), Some(q)) => (1.0 - w) * p + w * q,
+                    (Some(p), None) | (None, Some(p)) => p,
+                    (None, None) => la + w * (lb - la),
+                };
+                t_out.push(t);
+                l_out.push(if l.is_nan() {
+                    f64::NEG_INFINITY
+                } else {
+                    l.min(cap)
+                });
+            }
+        }
+        t_out.push(theta[n - 1]);
+        l_out.push(log_density[n - 1]);
+        Self::new(t_out, l_out)
     }
 
     /// Probability masses of the nodes (trapezoid weights times density), summing to one.

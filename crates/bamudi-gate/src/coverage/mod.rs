@@ -1,0 +1,536 @@
+//! The coverage study behind `cargo xtask coverage`: do the calibration's intervals hold the
+//! truth as often as they claim?
+//!
+//! For each scenario of the paper's Table 1 and each replicate `r`:
+//!
+//! 1. `θ*` is drawn from the scenario's prior (simulation-based calibration), and a fresh data
+//!    set is generated from the synthetic truth ([`mitergate::data::truth`]): the scenario's
+//!    `ρ` and discrepancy (Eq. 53-54, a shape the calibration's basis does not contain),
+//!    fresh water levels and fresh gauge noise, all from seeds derived from `(seed, scenario,
+//!    r)`.
+//! 2. Each requested coefficient mode calibrates it (Modules 2b-3). The coefficient estimator
+//!    of Module 2 depends on the model and the sampling rule, not on the measured strains, so it
+//!    is fitted once per scenario (on the first replicate's input range) and reused: the study
+//!    conditions on one fitted estimator, as a user does.
+//! 3. Scores against the truth: the transform `u = P(θ ≤ θ* | data)`, from which the central
+//!    50/80/90/95 % intervals' hits and the SBC rank follow ([`bamudi::validation`]); the
+//!    Module-4 95 % force bands at new water levels (fraction of condition × quoin-point pairs
+//!    inside, normal and tangential); the force RMSE after calibration over before.
+//!
+//! The summaries carry exact (Clopper-Pearson) 95 % intervals of each coverage, and the 1 %
+//! binomial acceptance region of its nominal level.
+
+mod markdown;
+mod truth;
+
+pub use markdown::mode_label;
+pub use truth::{DiscrepancyShape, Truth};
+
+use crate::error::{GateAppError, Result};
+use crate::paper::{ForceRmse, build_gate, gate_model, prior_mean_response};
+use bamudi::module2::estimator::FittedEstimator;
+use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
+use bamudi::{
+    Calibrate, Calibration, CalibrationParams, CoefficientMode, EstimatorParams, MarginalPrior,
+    SamplingRule, SupportPolicy,
+};
+use mitergate::data::truth::{Scenario, sample_levels};
+use mitergate::{ContactModel, GateMultiLevel};
+use numerics::random::derive_seed;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// The nominal levels of the central `θ` intervals checked.
+pub const LEVELS: [f64; 4] = [0.5, 0.8, 0.9, 0.95];
+
+/// Significance of the binomial acceptance regions reported.
+pub const ACCEPTANCE_ALPHA: f64 = 0.01;
+
+/// Bins of the SBC rank histogram.
+pub const RANK_BINS: usize = 10;
+
+/// Support points standing for the `θ` posterior in the Module-4 bands (see
+/// [`SupportPolicy`]: 32 merged groups keep all but about 1 % of a Gaussian posterior's
+/// variance, and bound the contact solves per condition).
+const BAND_SUPPORT: usize = 32;
+
+/// Options of a coverage study.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CoverageOptions {
+    /// Scenarios of Table 1 (1, 2).
+    pub scenarios: Vec<u8>,
+    /// Coefficient modes compared, each on every replicate.
+    pub modes: Vec<CoefficientMode>,
+    /// Replicate data sets per scenario.
+    pub n_replicates: usize,
+    /// Experiments per data set (paper: 500).
+    pub n_experiments: usize,
+    /// Module-2 training-set size (learnt estimators only).
+    pub training_size: usize,
+    /// The coefficient estimator of Eq. 29.
+    pub estimator: EstimatorParams,
+    /// `θ` grid points of Module 3.
+    pub theta_grid_points: usize,
+    /// New water-level pairs per replicate for the force bands.
+    pub new_conditions: usize,
+    /// Target element size of the gate mesh (in); `None` keeps the default gate's 12 in.
+    pub mesh_element_size: Option<f64>,
+    /// Gauge noise sd (microstrain) of the truth and of the Module-2 training outputs.
+    pub gauge_noise_sd: f64,
+    /// The shape of the true discrepancy (the paper's Eq. 53-54 by default).
+    pub discrepancy: DiscrepancyShape,
+    /// The coefficients' prior of the marginal mode.
+    pub marginal: MarginalPrior,
+    /// Worker threads for the replicates (0: all cores).
+    pub threads: usize,
+    /// Master seed.
+    pub seed: u64,
+}
+
+impl CoverageOptions {
+    /// The paper's size with the exact linear estimator: 500 experiments, the default
+    /// 12-in mesh, 100 replicates per scenario, the marginal and the conditional modes and the
+    /// paper's Module 3.
+    pub fn paper_exact() -> Self {
+        Self {
+            scenarios: vec![1, 2],
+            modes: vec![
+                CoefficientMode::Marginal,
+                CoefficientMode::ConditionalOnTheta,
+                CoefficientMode::PriorMarginal,
+            ],
+            n_replicates: 100,
+            n_experiments: 500,
+            training_size: 4_000,
+            estimator: EstimatorParams::ExactLinear,
+            theta_grid_points: 121,
+            new_conditions: 10,
+            mesh_element_size: None,
+            gauge_noise_sd: 1.0,
+            discrepancy: DiscrepancyShape::Paper,
+            marginal: MarginalPrior::default(),
+            threads: 0,
+            seed: 2021,
+        }
+    }
+
+    /// The suite's size: 40 replicates of 120 experiments on the 24-in mesh, exact
+    /// estimator, marginal mode only.
+    pub fn quick() -> Self {
+        Self {
+            modes: vec![CoefficientMode::Marginal],
+            n_replicates: 40,
+            n_experiments: 120,
+            theta_grid_points: 49,
+            new_conditions: 4,
+            mesh_element_size: Some(24.0),
+            ..Self::paper_exact()
+        }
+    }
+
+    fn check(&self) -> Result<()> {
+        let bad =
+            |key: &str, why: &str| Err(GateAppError::Option(format!("coverage {key}: {why}")));
+        if self.n_replicates < 2 {
+            return bad("replicates", "at least 2");
+        }
+        if self.modes.is_empty() || self.scenarios.is_empty() {
+            return bad("modes/scenarios", "at least one of each");
+        }
+        if let Some(s) = self.scenarios.iter().find(|s| !matches!(s, 1 | 2)) {
+            return bad("scenarios", &format!("unknown scenario {s} (1 or 2)"));
+        }
+        Ok(())
+    }
+}
+
+/// One replicate under one coefficient mode.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Replicate {
+    /// Replicate index.
+    pub index: usize,
+    /// `θ*` drawn from the prior (in).
+    pub theta_true: f64,
+    /// `P(θ ≤ θ* | data)`.
+    pub pit: f64,
+    /// Posterior mean and sd of `θ` (in).
+    pub theta_mean: f64,
+    /// Posterior sd of `θ` (in).
+    pub theta_sd: f64,
+    /// `ρ*` (modular modes) or `ρ`'s posterior mean (marginal mode).
+    pub rho: f64,
+    /// Fraction of condition × point pairs inside the 95 % normal-force band.
+    pub band_normal: f64,
+    /// The same for the tangential force.
+    pub band_tangential: f64,
+    /// Force RMSE before/after (lbf/in).
+    pub force_rmse: ForceRmse,
+    /// Seconds for the calibration and its scores.
+    pub seconds: f64,
+}
+
+/// A coverage with its exact interval and the acceptance region of its nominal level.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct LevelCoverage {
+    /// Nominal level.
+    pub level: f64,
+    /// Hits.
+    pub hits: usize,
+    /// Empirical coverage.
+    pub rate: f64,
+    /// Clopper-Pearson 95 % interval of the coverage.
+    pub interval: (f64, f64),
+    /// Hit counts consistent with the nominal level ([`ACCEPTANCE_ALPHA`]).
+    pub acceptance: (usize, usize),
+}
+
+/// Normal and tangential values.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct NormalTangential {
+    /// Normal force.
+    pub normal: f64,
+    /// Tangential force.
+    pub tangential: f64,
+}
+
+/// Summary of one scenario under one coefficient mode (the `--json` schema's entries).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ScenarioCoverage {
+    /// "scenario 1" / "scenario 2".
+    pub name: String,
+    /// The estimator's kind (`exact_linear`, `lstm`, `ridge`).
+    pub estimator: String,
+    /// The coefficient mode.
+    pub mode: CoefficientMode,
+    /// Replicates.
+    pub n_replicates: usize,
+    /// Empirical coverage of the central intervals, keyed by level ("0.5", "0.8", ...).
+    pub theta_coverage: BTreeMap<String, f64>,
+    /// The same with intervals and acceptance regions.
+    pub theta_levels: Vec<LevelCoverage>,
+    /// The SBC rank histogram ([`RANK_BINS`] bins).
+    pub sbc_histogram: Vec<usize>,
+    /// p-value of its χ² uniformity test.
+    pub sbc_uniformity_p: f64,
+    /// Mean over replicates of the fraction of points inside the 95 % force bands.
+    pub force_band_coverage_95: NormalTangential,
+    /// `ρ` over replicates: mean, sd, min, max.
+    pub rho: [f64; 4],
+    /// Median over replicates of force RMSE after / before.
+    pub force_rmse_ratio_median: NormalTangential,
+    /// Root mean square of `(mean − θ*)/sd` (1 for a calibrated Gaussian posterior).
+    pub z_rms: f64,
+    /// Median posterior sd of `θ` (in).
+    pub theta_sd_median: f64,
+    /// Wall time of this scenario and mode (s, summed over replicates).
+    pub seconds: f64,
+    /// Every replicate.
+    pub replicates: Vec<Replicate>,
+}
+
+/// The whole study.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CoverageReport {
+    /// Options used.
+    pub options: CoverageOptions,
+    /// Degrees of freedom of the gate model.
+    pub n_dofs: usize,
+    /// Target element size (in).
+    pub element_size: f64,
+    /// Per scenario and mode.
+    pub scenarios: Vec<ScenarioCoverage>,
+    /// Wall time (s).
+    pub total_s: f64,
+}
+
+/// Runs the study; `on_replicate` is called after each replicate (e.g. a progress bar), from
+/// worker threads.
+pub fn run(opts: &CoverageOptions, on_replicate: &(dyn Fn() + Sync)) -> Result<CoverageReport> {
+    opts.check()?;
+    let t = Instant::now();
+    let (contact, gate) = build_gate(opts.mesh_element_size)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads)
+        .build()
+        .map_err(|e| GateAppError::Option(format!("coverage threads: {e}")))?;
+    let mut scenarios = Vec::new();
+    for &number in &opts.scenarios {
+        let runs = pool.install(|| scenario_replicates(&contact, number, opts, on_replicate))?;
+        for (m, mode) in opts.modes.iter().enumerate() {
+            let reps: Vec<Replicate> = runs.iter().map(|r| r[m].clone()).collect();
+            scenarios.push(summarise(number, *mode, opts, reps)?);
+        }
+    }
+    Ok(CoverageReport {
+        options: opts.clone(),
+        n_dofs: gate.n_dofs,
+        element_size: gate.element_size,
+        scenarios,
+        total_s: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// One scenario's fixed parts.
+struct Setup<'a> {
+    contact: &'a ContactModel,
+    number: u8,
+    model: GateMultiLevel,
+    opts: &'a CoverageOptions,
+}
+
+/// Every replicate of one scenario (per replicate, one result per mode).
+fn scenario_replicates(
+    contact: &ContactModel,
+    number: u8,
+    opts: &CoverageOptions,
+    on_replicate: &(dyn Fn() + Sync),
+) -> Result<Vec<Vec<Replicate>>> {
+    let prior = Scenario::paper(number)?.prior;
+    let setup = Setup {
+        contact,
+        number,
+        model: gate_model(contact, prior)?,
+        opts,
+    };
+    // the first replicate fits the estimator the others reuse
+    let (first, estimator) = setup.replicate(0, None)?;
+    on_replicate();
+    let mut all = vec![first];
+    let rest = (1..opts.n_replicates)
+        .into_par_iter()
+        .map(|r| {
+            let out = setup.replicate(r, Some(&estimator)).map(|(reps, _)| reps);
+            on_replicate();
+            out
+        })
+        .collect::<Result<Vec<_>>>()?;
+    all.extend(rest);
+    Ok(all)
+}
+
+impl Setup<'_> {
+    /// The replicate's truth (`θ*` from the prior), its data and new conditions.
+    fn truth(&self, r: usize) -> Result<(Truth, bamudi::Experiments, Vec<[f64; 2]>)> {
+        let base = derive_seed(self.opts.seed, 1000 * self.number as u64 + r as u64);
+        let scenario = Scenario::paper(self.number)?;
+        let (lo, hi) = scenario.prior;
+        let truth = Truth {
+            theta: lo + (hi - lo) * unit_uniform(derive_seed(base, 1)),
+            rho: scenario.rho,
+            shape: self.opts.discrepancy,
+        };
+        let levels = sample_levels(self.opts.n_experiments, derive_seed(base, 2));
+        let y = truth.strains(
+            self.contact,
+            &levels,
+            self.opts.gauge_noise_sd,
+            derive_seed(base, 4),
+        )?;
+        let x = nalgebra::DMatrix::from_fn(levels.len(), 2, |i, j| levels[i][j]);
+        let gauges = (1..=y.ncols()).map(|g| format!("g{g}")).collect();
+        let exps = bamudi::Experiments::new(vec!["h_up".into(), "h_down".into()], gauges, x, y)?;
+        let new_x = sample_levels(self.opts.new_conditions, derive_seed(base, 3));
+        Ok((truth, exps, new_x))
+    }
+
+    fn params(&self, mode: CoefficientMode, r: usize) -> CalibrationParams {
+        let sampling = SamplingRule::default().noise_sd(self.opts.gauge_noise_sd);
+        CalibrationParams::default()
+            .estimator(self.opts.estimator.clone())
+            .training_size(self.opts.training_size)
+            .theta_grid_points(self.opts.theta_grid_points)
+            .sampling(sampling)
+            .coefficients(mode)
+            .marginal(self.opts.marginal.clone())
+            .seed(derive_seed(self.opts.seed, 7 + r as u64))
+    }
+
+    /// Every mode on replicate `r`; returns the estimator fitted (or the one given).
+    fn replicate(
+        &self,
+        r: usize,
+        estimator: Option<&(FittedEstimator, usize)>,
+    ) -> Result<(Vec<Replicate>, (FittedEstimator, usize))> {
+        let (truth, exps, new_x) = self.truth(r)?;
+        let mut fitted = estimator.cloned();
+        let mut out = Vec::new();
+        for &mode in &self.opts.modes {
+            let t = Instant::now();
+            let cfg = self.params(mode, r).check()?;
+            let cal = match &fitted {
+                Some((est, pool)) => Calibrate::new(&cfg).run_with_estimator(
+                    &self.model,
+                    &exps,
+                    est.clone(),
+                    *pool,
+                )?,
+                None => Calibrate::new(&cfg).run(&self.model, &exps)?,
+            };
+            let m2 = cal.module2();
+            fitted.get_or_insert_with(|| (m2.estimator.clone(), m2.training_pool_size));
+            let mut rep = self.score(&cal, &truth, &new_x)?;
+            (rep.index, rep.seconds) = (r, t.elapsed().as_secs_f64());
+            out.push(rep);
+        }
+        let fitted = fitted.ok_or_else(|| GateAppError::Option("coverage: no mode ran".into()))?;
+        Ok((out, fitted))
+    }
+
+    /// The replicate's scores against its truth.
+    fn score(&self, cal: &Calibration, truth: &Truth, new_x: &[[f64; 2]]) -> Result<Replicate> {
+        let post = &cal.module3().posterior;
+        let predictor = cal
+            .predictor(&self.model)?
+            .support_policy(&SupportPolicy::default().max_nodes(BAND_SUPPORT))?;
+        let nu = self.contact.gate().n_points();
+        let mut tally = BandTally::default();
+        for x in new_x {
+            let truth_f = truth.forces(self.contact, *x)?;
+            let before = prior_mean_response(&self.model, x)?;
+            let band = predictor.response(x)?;
+            for p in 0..2 * nu {
+                tally.add(p < nu, truth_f[p], before[p], &band, p);
+            }
+        }
+        let s = post.summary(0);
+        Ok(Replicate {
+            index: 0,
+            theta_true: truth.theta,
+            pit: post.cdf(0, truth.theta),
+            theta_mean: s.mean,
+            theta_sd: s.sd,
+            rho: cal.rho_star(),
+            band_normal: tally.inside[0] as f64 / tally.n[0].max(1) as f64,
+            band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
+            force_rmse: tally.rmse(),
+            seconds: 0.0,
+        })
+    }
+}
+
+/// Band hits and squared errors, normal `[0]` and tangential `[1]`.
+#[derive(Default)]
+struct BandTally {
+    inside: [usize; 2],
+    n: [usize; 2],
+    ss_before: [f64; 2],
+    ss_after: [f64; 2],
+}
+
+impl BandTally {
+    fn add(&mut self, normal: bool, truth: f64, before: f64, band: &bamudi::Band, p: usize) {
+        let c = usize::from(!normal);
+        self.n[c] += 1;
+        self.inside[c] += usize::from(band.lower[p] <= truth && truth <= band.upper[p]);
+        self.ss_before[c] += (before - truth).powi(2);
+        self.ss_after[c] += (band.mean[p] - truth).powi(2);
+    }
+
+    fn rmse(&self) -> ForceRmse {
+        let r = |ss: f64, c: usize| (ss / self.n[c].max(1) as f64).sqrt();
+        ForceRmse {
+            normal_before: r(self.ss_before[0], 0),
+            normal_after: r(self.ss_after[0], 0),
+            tangential_before: r(self.ss_before[1], 1),
+            tangential_after: r(self.ss_after[1], 1),
+        }
+    }
+}
+
+/// The summary of one scenario and mode over its replicates.
+fn summarise(
+    number: u8,
+    mode: CoefficientMode,
+    opts: &CoverageOptions,
+    reps: Vec<Replicate>,
+) -> Result<ScenarioCoverage> {
+    let n = reps.len();
+    let pits: Vec<f64> = reps.iter().map(|r| r.pit).collect();
+    let levels = LEVELS
+        .iter()
+        .map(|&level| {
+            let c = Coverage::from_pits(&pits, level);
+            Ok(LevelCoverage {
+                level,
+                hits: c.hits,
+                rate: c.rate(),
+                interval: c.clopper_pearson(0.95)?,
+                acceptance: binomial_acceptance(n, level, ACCEPTANCE_ALPHA)?,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let hist = RankHistogram::new(&pits, RANK_BINS)?;
+    let mean = |f: &dyn Fn(&Replicate) -> f64| reps.iter().map(f).sum::<f64>() / n as f64;
+    let rhos: Vec<f64> = reps.iter().map(|r| r.rho).collect();
+    let rho_mean = mean(&|r| r.rho);
+    let rho_sd = (mean(&|r| (r.rho - rho_mean).powi(2))).sqrt();
+    let fold = |f: fn(f64, f64) -> f64, init| rhos.iter().copied().fold(init, f);
+    Ok(ScenarioCoverage {
+        name: format!("scenario {number}"),
+        estimator: estimator_kind(&opts.estimator),
+        mode,
+        n_replicates: n,
+        theta_coverage: levels
+            .iter()
+            .map(|l| (l.level.to_string(), l.rate))
+            .collect(),
+        theta_levels: levels,
+        sbc_histogram: hist.counts,
+        sbc_uniformity_p: hist.p_value,
+        force_band_coverage_95: NormalTangential {
+            normal: mean(&|r| r.band_normal),
+            tangential: mean(&|r| r.band_tangential),
+        },
+        rho: [
+            rho_mean,
+            rho_sd,
+            fold(f64::min, f64::INFINITY),
+            fold(f64::max, f64::NEG_INFINITY),
+        ],
+        force_rmse_ratio_median: NormalTangential {
+            normal: median(
+                reps.iter()
+                    .map(|r| r.force_rmse.normal_after / r.force_rmse.normal_before),
+            ),
+            tangential: median(
+                reps.iter()
+                    .map(|r| r.force_rmse.tangential_after / r.force_rmse.tangential_before),
+            ),
+        },
+        z_rms: mean(&|r| ((r.theta_mean - r.theta_true) / r.theta_sd).powi(2)).sqrt(),
+        theta_sd_median: median(reps.iter().map(|r| r.theta_sd)),
+        seconds: reps.iter().map(|r| r.seconds).sum(),
+        replicates: reps,
+    })
+}
+
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    numerics::robust::median(&mut values.collect::<Vec<_>>())
+}
+
+/// A uniform number in `[0, 1)` from the top 53 bits of a derived seed.
+fn unit_uniform(bits: u64) -> f64 {
+    (bits >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// `exact_linear`, `lstm` or `ridge`.
+pub fn estimator_kind(e: &EstimatorParams) -> String {
+    match e {
+        EstimatorParams::Lstm(_) => "lstm",
+        EstimatorParams::Ridge(_) => "ridge",
+        EstimatorParams::ExactLinear => "exact_linear",
+    }
+    .into()
+}
+
+impl CoverageReport {
+    /// The report as pretty JSON.
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_string_pretty(self).map_err(|e| GateAppError::Serde {
+            context: "coverage report".into(),
+            reason: e.to_string(),
+        })
+    }
+}

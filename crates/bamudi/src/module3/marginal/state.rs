@@ -1,0 +1,142 @@
+//! What Module 4 needs of the marginal mode: the coefficients' posterior at new inputs.
+
+use super::{Covariance, LowRank, MarginalFit, MarginalNode, supported_basis};
+use crate::error::Result;
+use crate::module2::training::LinearParts;
+use nalgebra::{DMatrix, DVector};
+
+/// The factored covariance of a marginal-mode calibration and its (supported) basis, rebuilt
+/// from the stored fit rather than stored.
+#[derive(Debug, Clone)]
+pub struct MarginalState {
+    cov: Covariance,
+    l: DMatrix<f64>,
+    b: DMatrix<f64>,
+}
+
+impl MarginalState {
+    /// Rebuilds the factorisation of `V` for the experiments `x`, the model's parts and `σ²`.
+    pub fn new(
+        fit: &MarginalFit,
+        x: &DMatrix<f64>,
+        parts: &LinearParts,
+        sigma2: f64,
+    ) -> Result<Self> {
+        let (l, b) = supported_basis(parts, fit.support.as_deref());
+        let lr = LowRank::new(&fit.priors, x, &fit.amplitudes, &b)?;
+        Ok(Self {
+            cov: Covariance::new(lr, fit.amplitude, sigma2)?,
+            l,
+            b,
+        })
+    }
+
+    /// The discrepancy basis `L` and `B = A L` restricted to the support (`C N_u x K`,
+    /// `N_o x K`).
+    pub fn basis(&self) -> (&DMatrix<f64>, &DMatrix<f64>) {
+        (&self.l, &self.b)
+    }
+
+    /// Posterior covariance of the coefficients at `x` given the data (`K x K`; the same at
+    /// every `θ` and `ρ`): `s P − s² Cy V⁻¹ Cyᵀ`, with `P` the prior correlation at `x`
+    /// scaled by `ax`, `Cy` the prior covariance between the coefficients at `x` and the
+    /// observations, and `cmat[:, k] = C_k(x, X)` ([`MarginalFit::cross_cov`]).
+    pub fn coefficient_cov(
+        &self,
+        fit: &MarginalFit,
+        x: &[f64],
+        ax: &[f64],
+        cmat: &DMatrix<f64>,
+    ) -> DMatrix<f64> {
+        let (cov, s) = (&self.cov, fit.amplitude);
+        let k = fit.priors.len();
+        let bb = self.b.transpose() * &self.b;
+        let cc = DMatrix::from_fn(k, k, |i, j| {
+            cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
+        });
+        let qz = cov.spectrum.rotate(&cov.lr.project_cross(cmat));
+        let q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
+        let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
+            true => ax[i] * ax[i] * fit.priors[i].cov(x, x),
+            false => 0.0,
+        });
+        prior * s - q * (s * s)
+    }
+}
+
+impl MarginalFit {
+    /// `C_k(x, x_i)` for every experiment and coefficient (`N_e x K`), with the scales `ax` of
+    /// the coefficients at `x`.
+    pub fn cross_cov(&self, x: &[f64], ax: &[f64], experiments: &DMatrix<f64>) -> DMatrix<f64> {
+        DMatrix::from_fn(experiments.nrows(), self.priors.len(), |i, k| {
+            let xi: Vec<f64> = experiments.row(i).iter().copied().collect();
+            ax[k] * self.amplitudes[(i, k)] * self.priors[k].cov(x, &xi)
+        })
+    }
+
+    /// The coefficients' posterior mean at `x` given node `node` and `ρ`, and its derivative
+    /// in `ρ` (`K` each), from the cross covariances `cmat` ([`cross_cov`](Self::cross_cov)).
+    pub fn coefficient_mean(
+        &self,
+        node: &MarginalNode,
+        cmat: &DMatrix<f64>,
+        rho: f64,
+    ) -> (DVector<f64>, DVector<f64>) {
+        let s = self.amplitude;
+        let k = self.priors.len();
+        let mean = DVector::from_fn(k, |c, _| {
+            s * cmat
+                .column(c)
+                .dot(&(node.u0.column(c) - node.u1.column(c) * rho))
+        });
+        let slope = DVector::from_fn(k, |c, _| -s * cmat.column(c).dot(&node.u1.column(c)));
+        (mean, slope)
+    }
+
+    /// The nodes grouped into at most `max` equal-mass groups of neighbouring `θ` (scalar `θ`;
+    /// each group's data mass-weighted), or as stored.
+    pub fn grouped_nodes(&self, max: usize) -> Vec<MarginalNode> {
+        if self.nodes.len() <= max || self.nodes.first().is_none_or(|n| n.theta.len() != 1) {
+            return self.nodes.clone();
+        }
+        let mut order: Vec<&MarginalNode> = self.nodes.iter().collect();
+        order.sort_by(|a, b| a.theta[0].total_cmp(&b.theta[0]));
+        let mut groups: Vec<Vec<&MarginalNode>> = vec![Vec::new(); max];
+        let mut cum = 0.0;
+        for n in order {
+            let g = (((cum + 0.5 * n.weight) * max as f64) as usize).min(max - 1);
+            groups[g].push(n);
+            cum += n.weight;
+        }
+        groups
+            .into_iter()
+            .filter(|g| !g.is_empty())
+            .map(|g| merge_nodes(&g))
+            .collect()
+    }
+}
+
+/// The mass-weighted mean of `nodes` (their second moment of `ρ` kept).
+fn merge_nodes(nodes: &[&MarginalNode]) -> MarginalNode {
+    let w: f64 = nodes.iter().map(|n| n.weight).sum();
+    let avg =
+        |f: &dyn Fn(&MarginalNode) -> f64| nodes.iter().map(|n| n.weight * f(n)).sum::<f64>() / w;
+    let avg_m = |f: &dyn Fn(&MarginalNode) -> &DMatrix<f64>| {
+        let first = f(nodes[0]);
+        nodes
+            .iter()
+            .fold(DMatrix::zeros(first.nrows(), first.ncols()), |acc, n| {
+                acc + f(n) * (n.weight / w)
+            })
+    };
+    let rho_mean = avg(&|n| n.rho_mean);
+    let second = avg(&|n| n.rho_var + n.rho_mean * n.rho_mean);
+    MarginalNode {
+        theta: vec![avg(&|n| n.theta[0])],
+        weight: w,
+        rho_mean,
+        rho_var: (second - rho_mean * rho_mean).max(0.0),
+        u0: avg_m(&|n| &n.u0),
+        u1: avg_m(&|n| &n.u1),
+    }
+}

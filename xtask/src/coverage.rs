@@ -1,0 +1,273 @@
+//! `cargo xtask coverage`: the coverage study of `bamudi_gate::coverage`, its markdown, JSON
+//! and two SVG plots (coverage against the nominal level; SBC rank histograms).
+
+use crate::plots::{line_plot, series};
+use anyhow::{Context, Result, bail};
+use bamudi::CoefficientMode;
+use bamudi::module2::estimator::LstmSettings;
+use bamudi_gate::coverage::{self, CoverageOptions, CoverageReport, LEVELS, RANK_BINS};
+use indicatif::{ProgressBar, ProgressStyle};
+use plotters::style::RGBColor;
+use std::path::{Path, PathBuf};
+
+/// The command line's choices.
+#[derive(clap::Args)]
+pub struct CoverageArgs {
+    /// CI-sized study (40 replicates, 120 experiments, 24-in mesh, exact estimator, marginal mode).
+    #[arg(long)]
+    quick: bool,
+    /// Coefficient estimator: exact, lstm (reduced size, see `lstm_reduced`) or ridge.
+    #[arg(long, default_value = "exact")]
+    estimator: String,
+    /// Replicates per scenario.
+    #[arg(long)]
+    replicates: Option<usize>,
+    /// Experiments per replicate.
+    #[arg(long)]
+    experiments: Option<usize>,
+    /// Module-2 training-set size (learnt estimators).
+    #[arg(long)]
+    training_size: Option<usize>,
+    /// Mesh element size (in).
+    #[arg(long)]
+    mesh: Option<f64>,
+    /// Coefficient modes, comma separated: marginal, conditional_on_theta, prior_marginal.
+    #[arg(long, value_delimiter = ',')]
+    modes: Option<Vec<String>>,
+    /// Scenarios, comma separated (1, 2).
+    #[arg(long, value_delimiter = ',')]
+    scenarios: Option<Vec<u8>>,
+    /// Shape of the true discrepancy.
+    #[arg(long, value_enum, default_value = "paper")]
+    discrepancy: coverage::DiscrepancyShape,
+    /// Marginal mode: the coefficients' prior scales, shared_per_component or per_coefficient.
+    #[arg(long, default_value = "shared_per_component")]
+    scales: String,
+    /// Marginal mode: the coefficients' kernel, module2 or matern52.
+    #[arg(long, default_value = "matern52")]
+    coefficient_kernel: String,
+    /// Marginal mode: keep the discrepancy where the model's response vanishes (the gap).
+    #[arg(long)]
+    no_support_mask: bool,
+    /// Worker threads (0: all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Master seed.
+    #[arg(long, default_value_t = 2021)]
+    seed: u64,
+    /// Also write the report as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Re-render the markdown and plots of a saved `--json` report (no calibration runs); the
+    /// outputs are named by `--out` and the tag of the other flags, as for a fresh run.
+    #[arg(long)]
+    render: Option<PathBuf>,
+    /// Output directory of the markdown and the plots.
+    #[arg(long, default_value = "docs/results")]
+    out: PathBuf,
+}
+
+/// The LSTM at the reduced size of the coverage study: the paper's architecture (hidden 64,
+/// one layer, 10 steps) trained on 10,000 samples for at most 30 epochs.
+fn lstm_reduced() -> LstmSettings {
+    LstmSettings {
+        hidden: 64,
+        layers: 1,
+        steps: 10,
+        epochs: 30,
+        batch_size: 256,
+        learning_rate: 1e-3,
+        validation_fraction: 0.1,
+        patience: 10,
+        ..Default::default()
+    }
+}
+
+fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
+    let mut o = if a.quick {
+        CoverageOptions::quick()
+    } else {
+        CoverageOptions::paper_exact()
+    };
+    o.estimator = match a.estimator.as_str() {
+        "exact" | "exact_linear" => bamudi::EstimatorParams::ExactLinear,
+        "lstm" => {
+            o.training_size = 10_000;
+            bamudi::EstimatorParams::Lstm(lstm_reduced())
+        }
+        "ridge" => bamudi::EstimatorParams::Ridge(bamudi::RidgeParams { lambda: 1e-3 }),
+        other => bail!("--estimator {other}: expected exact, lstm or ridge"),
+    };
+    if let Some(modes) = &a.modes {
+        o.modes = modes.iter().map(|m| parse_mode(m)).collect::<Result<_>>()?;
+    }
+    o.n_replicates = a.replicates.unwrap_or(o.n_replicates);
+    o.n_experiments = a.experiments.unwrap_or(o.n_experiments);
+    o.training_size = a.training_size.unwrap_or(o.training_size);
+    o.mesh_element_size = a.mesh.or(o.mesh_element_size);
+    o.scenarios = a.scenarios.clone().unwrap_or(o.scenarios);
+    (o.threads, o.seed, o.discrepancy) = (a.threads, a.seed, a.discrepancy);
+    o.marginal = bamudi::MarginalPrior {
+        scales: serde_json::from_value(serde_json::Value::String(a.scales.clone())).with_context(
+            || {
+                format!(
+                    "--scales {}: expected shared_per_component or per_coefficient",
+                    a.scales
+                )
+            },
+        )?,
+        mask_outside_support: !a.no_support_mask,
+        kernel: serde_json::from_value(serde_json::Value::String(a.coefficient_kernel.clone()))
+            .with_context(|| {
+                format!(
+                    "--coefficient-kernel {}: expected module2 or matern52",
+                    a.coefficient_kernel
+                )
+            })?,
+    };
+    Ok(o)
+}
+
+fn parse_mode(m: &str) -> Result<CoefficientMode> {
+    serde_json::from_value(serde_json::Value::String(m.trim().into())).with_context(|| {
+        format!("--modes {m}: expected marginal, conditional_on_theta or prior_marginal")
+    })
+}
+
+/// Runs the study (or reads a saved one) and writes `coverage[-tag].md`, `coverage[-tag].svg`,
+/// `sbc[-tag].svg`.
+pub fn run(a: &CoverageArgs) -> Result<()> {
+    let opts = options(a)?;
+    let report = match &a.render {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+        }
+        None => study(&opts)?,
+    };
+    let tag = tag(a, &report.options);
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let md = report.markdown();
+    println!("{md}");
+    let md_path = a.out.join(format!("coverage{tag}.md"));
+    bamudi::data::write_atomic(&md_path, md.as_bytes())?;
+    coverage_plot(&a.out.join(format!("coverage{tag}.svg")), &report)?;
+    rank_plot(&a.out.join(format!("sbc{tag}.svg")), &report)?;
+    if let (Some(path), None) = (&a.json, &a.render) {
+        bamudi::data::write_atomic(path, report.to_json()?.as_bytes())?;
+    }
+    eprintln!("wrote {}", md_path.display());
+    Ok(())
+}
+
+fn study(opts: &CoverageOptions) -> Result<CoverageReport> {
+    bamudi_gate::progress::init_logging(false);
+    let total = (opts.n_replicates * opts.scenarios.len()) as u64;
+    let bar = if std::env::var_os("CI").is_none() {
+        ProgressBar::new(total)
+    } else {
+        ProgressBar::hidden()
+    };
+    if let Ok(style) = ProgressStyle::with_template("replicates [{bar:40}] {pos}/{len} ({eta})") {
+        bar.set_style(style);
+    }
+    let report = coverage::run(opts, &|| bar.inc(1))?;
+    bar.finish_and_clear();
+    Ok(report)
+}
+
+/// `-quick`, `-<estimator>`, `-<shape>`, `-prior-variant` as they apply.
+fn tag(a: &CoverageArgs, o: &CoverageOptions) -> String {
+    let mut tag = if a.quick {
+        "-quick".to_string()
+    } else {
+        String::new()
+    };
+    if !matches!(a.estimator.as_str(), "exact" | "exact_linear") {
+        tag.push_str(&format!("-{}", a.estimator));
+    }
+    if let Ok(serde_json::Value::String(shape)) = serde_json::to_value(o.discrepancy)
+        && o.discrepancy != coverage::DiscrepancyShape::Paper
+    {
+        tag.push_str(&format!("-{shape}"));
+    }
+    if o.marginal != bamudi::MarginalPrior::default() {
+        tag.push_str("-prior-variant");
+    }
+    tag
+}
+
+const COLORS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(140, 86, 75),
+];
+
+fn label(s: &coverage::ScenarioCoverage) -> String {
+    format!("{}, {}", s.name, coverage::mode_label(s.mode))
+}
+
+/// Empirical coverage against the nominal level, with the diagonal.
+fn coverage_plot(path: &Path, r: &CoverageReport) -> Result<()> {
+    let mut all = vec![series(
+        "nominal",
+        RGBColor(0, 0, 0),
+        &[0.5, 0.95],
+        &[0.5, 0.95],
+        true,
+    )];
+    for (i, s) in r.scenarios.iter().enumerate() {
+        let rates: Vec<f64> = s.theta_levels.iter().map(|l| l.rate).collect();
+        all.push(series(
+            &label(s),
+            COLORS[i % COLORS.len()],
+            &LEVELS,
+            &rates,
+            false,
+        ));
+    }
+    line_plot(
+        path,
+        "Coverage of the central θ intervals",
+        "nominal level",
+        "empirical coverage",
+        &all,
+    )
+}
+
+/// The SBC rank histograms as step lines (replicates per bin of the posterior CDF at θ*).
+fn rank_plot(path: &Path, r: &CoverageReport) -> Result<()> {
+    let mut all = Vec::new();
+    for (i, s) in r.scenarios.iter().enumerate() {
+        let (mut xs, mut ys) = (Vec::new(), Vec::new());
+        for (b, c) in s.sbc_histogram.iter().enumerate() {
+            xs.extend([
+                b as f64 / RANK_BINS as f64,
+                (b + 1) as f64 / RANK_BINS as f64,
+            ]);
+            ys.extend([*c as f64, *c as f64]);
+        }
+        all.push(series(&label(s), COLORS[i % COLORS.len()], &xs, &ys, false));
+    }
+    if let Some(s) = r.scenarios.first() {
+        let expected = s.n_replicates as f64 / RANK_BINS as f64;
+        all.push(series(
+            "uniform",
+            RGBColor(0, 0, 0),
+            &[0.0, 1.0],
+            &[expected, expected],
+            true,
+        ));
+    }
+    line_plot(
+        path,
+        "SBC rank histograms",
+        "posterior CDF at θ*",
+        "replicates",
+        &all,
+    )
+}
