@@ -12,6 +12,8 @@ pub struct MarginalState {
     cov: Covariance,
     l: DMatrix<f64>,
     b: DMatrix<f64>,
+    /// `Bᵀ B` (`K x K`), used at every prediction input.
+    btb: DMatrix<f64>,
 }
 
 impl MarginalState {
@@ -26,6 +28,7 @@ impl MarginalState {
         let lr = LowRank::new(&fit.priors, x, &fit.amplitudes, &b)?;
         Ok(Self {
             cov: Covariance::new(lr, fit.amplitude, sigma2)?,
+            btb: b.transpose() * &b,
             l,
             b,
         })
@@ -50,7 +53,7 @@ impl MarginalState {
     ) -> DMatrix<f64> {
         let (cov, s) = (&self.cov, fit.amplitude);
         let k = fit.priors.len();
-        let bb = self.b.transpose() * &self.b;
+        let bb = &self.btb;
         let cc = DMatrix::from_fn(k, k, |i, j| {
             cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
         });
