@@ -60,7 +60,7 @@ pub fn run(opts: &CalculixCheck) -> Result<()> {
     println!("{md}");
     eprintln!("deck: {}", report.deck.display());
     if let Some(path) = &opts.report {
-        std::fs::write(path, &md).with_context(|| format!("writing {}", path.display()))?;
+        bamudi::data::write_atomic(path, md.as_bytes())?;
     }
     Ok(())
 }

@@ -132,7 +132,7 @@ fn reproduce(
             res.theta_posterior.sd,
             res.theta_true
         );
-        plots::scenario_plots(&out, res, cal, model).map_err(|e| {
+        plots::scenario_plots(&out, res, cal, model, &opts).map_err(|e| {
             bamudi_gate::GateAppError::Engine(bamudi::BamudiError::Calibration(format!(
                 "plots: {e:#}"
             )))
@@ -145,10 +145,9 @@ fn reproduce(
     } else {
         "reproduce-paper.md"
     });
-    std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
+    bamudi::data::write_atomic(&md_path, md.as_bytes())?;
     if let Some(path) = json {
-        std::fs::write(&path, report.to_json()?)
-            .with_context(|| format!("writing {}", path.display()))?;
+        bamudi::data::write_atomic(&path, report.to_json()?.as_bytes())?;
     }
     eprintln!("wrote {}", md_path.display());
     Ok(())

@@ -1,12 +1,14 @@
 //! Plots of the reproduction, equivalent to the paper's Fig. 13-22.
 //!
-//! Per scenario directory: `results.json`, `report.md`, `rho_curve.svg` (Fig. 13),
+//! Per scenario directory, for the headline calibration (the default marginal mode; its
+//! name is in every title): `results.json`, `report.md`, `rho_curve.svg` (Fig. 13),
 //! `gp_coefficients.svg` (Fig. 14) and `theta_posterior.svg` (Fig. 16) from
-//! `bamudi_gate::report::calibration::write_report`; here `discrepancy.svg` (Fig. 15), `forces.svg` (Fig. 17),
-//! `normal_force_error.svg` (Fig. 18), `strain_errors.svg` (Fig. 19/20) and
-//! `force_history.svg` (Fig. 21/22).
+//! `bamudi_gate::report::calibration::write_report`; here `discrepancy_{normal,tangential}.svg`
+//! (Fig. 15), `forces_{normal,tangential}.svg` (Fig. 17), `normal_force_error.svg` (Fig. 18)
+//! and `history_{normal,tangential}.svg` (Fig. 21/22). The strain errors of Fig. 19/20 are
+//! tables in `reproduce-paper.md`, not a plot.
 
-use anyhow::{Result, anyhow};
+use anyhow::Result;
 use bamudi::Calibration;
 use bamudi_gate::paper::ScenarioResult;
 use mitergate::GateMultiLevel;
@@ -15,23 +17,16 @@ use mlmodel::UnobservableModel;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// One labelled polyline.
-pub(crate) struct Series {
-    label: String,
-    color: RGBColor,
-    points: Vec<(f64, f64)>,
-    dashed: bool,
-}
+pub(crate) use bamudi_gate::report::plot::Series;
+use bamudi_gate::report::plot::{AFTER, Axes, BAND, BEFORE, TRUTH};
 
+/// A labelled polyline in the shared style (an empty label stays out of the legend).
 pub(crate) fn series(label: &str, color: RGBColor, xs: &[f64], ys: &[f64], dashed: bool) -> Series {
-    Series {
-        label: label.into(),
-        color,
-        points: xs.iter().copied().zip(ys.iter().copied()).collect(),
-        dashed,
-    }
+    let s = Series::xy(label, color, xs, ys);
+    if dashed { s.dashed() } else { s }
 }
 
+/// The shared line plot (legend in its own strip, units in the labels).
 pub(crate) fn line_plot(
     path: &Path,
     title: &str,
@@ -39,65 +34,9 @@ pub(crate) fn line_plot(
     ylabel: &str,
     all: &[Series],
 ) -> Result<()> {
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-    for s in all {
-        for &(x, y) in &s.points {
-            if x.is_finite() && y.is_finite() {
-                x0 = x0.min(x);
-                x1 = x1.max(x);
-                y0 = y0.min(y);
-                y1 = y1.max(y);
-            }
-        }
-    }
-    let pad = 0.05 * (y1 - y0).abs().max(1e-9);
-    let root = SVGBackend::new(path, (900, 560)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0..x1.max(x0 + 1e-9), (y0 - pad)..(y1 + pad))
-        .map_err(|e| anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc(xlabel)
-        .y_desc(ylabel)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    for s in all {
-        let style = ShapeStyle::from(&s.color).stroke_width(2);
-        let color = s.color;
-        if s.dashed {
-            chart
-                .draw_series(DashedLineSeries::new(s.points.clone(), 6, 4, style))
-                .map_err(|e| anyhow!("{e}"))?
-                .label(s.label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color));
-        } else {
-            chart
-                .draw_series(LineSeries::new(s.points.clone(), style))
-                .map_err(|e| anyhow!("{e}"))?
-                .label(s.label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color));
-        }
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
+    bamudi_gate::report::plot::line_plot(path, &Axes::new(title, xlabel, ylabel), all)?;
     Ok(())
 }
-
-const TRUE_C: RGBColor = RGBColor(0, 0, 0);
-const BEFORE_C: RGBColor = RGBColor(200, 60, 40);
-const AFTER_C: RGBColor = RGBColor(30, 90, 200);
-const BAND_C: RGBColor = RGBColor(120, 160, 230);
 
 fn prior_mean(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
     let rule = model.prior.quadrature(8)?;
@@ -110,15 +49,44 @@ fn prior_mean(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
     Ok(acc)
 }
 
+/// The 1-99 % quantile range of `values`, padded 10 %.
+fn quantile_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let mut v: Vec<f64> = values.filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return (0.0, 1.0);
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = (at(0.01), at(0.99));
+    let pad = 0.1 * (hi - lo).max(1.0);
+    (lo - pad, hi + pad)
+}
+
 /// Writes all plots of one scenario into `out/<scenario name>/`.
 pub fn scenario_plots(
     out: &Path,
     res: &ScenarioResult,
     cal: &Calibration,
     model: &GateMultiLevel,
+    opts: &bamudi_gate::paper::ReproduceOptions,
 ) -> Result<()> {
     let dir = out.join(res.name.replace(' ', "-"));
-    bamudi_gate::report::calibration::write_report(cal, model.prior.as_ref(), &dir)?;
+    let inputs = bamudi_gate::report::calibration::ReportInputs {
+        config: "cargo xtask reproduce-paper (the paper's Table 1 settings)".into(),
+        data: format!(
+            "{} synthetic experiments of {} (Eq. 48, 53-54), truth θ* = {} in",
+            opts.n_experiments, res.name, res.theta_true
+        ),
+        gate: "embedded default gate".into(),
+        element_size_in: opts
+            .mesh_element_size
+            .unwrap_or(mitergate::GateConfig::default().mesh.element_size),
+        gap_prior_in: model.prior.bounds()[0],
+        seed: opts.seed,
+        theta_true: Some(res.theta_true),
+        warnings: vec![],
+    };
+    bamudi_gate::report::calibration::write_report(cal, model.prior.as_ref(), &inputs, &dir)?;
     let number = if res.theta_true < 120.0 { 1 } else { 2 };
     let scenario = Scenario::paper(number)?;
     let contact = model.unobservable.inner().contact();
@@ -135,51 +103,60 @@ pub fn scenario_plots(
     let disc = cal.predictor(model)?.discrepancy(&x)?;
     let resp = cal.predictor(model)?.response(&x)?;
     let before = prior_mean(model, &x)?;
+    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
     for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         let r = c * nu..(c + 1) * nu;
         line_plot(
             &dir.join(format!("discrepancy_{name}.svg")),
             &format!(
-                "{}: {name} force discrepancy at h_up={}, h_down={} (Fig. 15)",
+                "{}, {mode}: {name} force discrepancy at h_up = {} in, h_down = {} in (Fig. 15)",
                 res.name, x[0], x[1]
             ),
             "height on the quoin d_u (in)",
             "discrepancy (lbf/in)",
             &[
-                series("true δ (Eq. 53-54)", TRUE_C, &d, &delta[r.clone()], false),
-                series("BA-MUDI mean", AFTER_C, &d, &disc.mean[r.clone()], false),
-                series("95% band", BAND_C, &d, &disc.lower[r.clone()], true),
-                series("", BAND_C, &d, &disc.upper[r.clone()], true),
+                series("true δ (Eq. 53-54)", TRUTH, &d, &delta[r.clone()], false),
+                series("BA-MUDI mean", AFTER, &d, &disc.mean[r.clone()], false),
+                series("95 % band", BAND, &d, &disc.lower[r.clone()], true),
+                series("", BAND, &d, &disc.upper[r.clone()], true),
             ],
         )?;
-        line_plot(
-            &dir.join(format!("forces_{name}.svg")),
+        let all = [
+            series("truth ρ g + δ", TRUTH, &d, &truth_f[r.clone()], false),
+            series(
+                "before (prior mean, ρ = 1, no δ)",
+                BEFORE,
+                &d,
+                &before[r.clone()],
+                true,
+            ),
+            series(
+                "after BA-MUDI (Eq. 52)",
+                AFTER,
+                &d,
+                &resp.mean[r.clone()],
+                false,
+            ),
+            series("95 % band", BAND, &d, &resp.lower[r.clone()], true),
+            series("", BAND, &d, &resp.upper[r.clone()], true),
+        ];
+        let mut axes = Axes::new(
             &format!(
-                "{}: total {name} force at h_up={}, h_down={} (Fig. 17)",
+                "{}, {mode}: total {name} force at h_up = {} in, h_down = {} in (Fig. 17)",
                 res.name, x[0], x[1]
             ),
             "height on the quoin d_u (in)",
             "force (lbf/in)",
-            &[
-                series("truth ρ g + δ", TRUE_C, &d, &truth_f[r.clone()], false),
-                series(
-                    "before (prior mean, ρ=1, no δ)",
-                    BEFORE_C,
-                    &d,
-                    &before[r.clone()],
-                    true,
-                ),
-                series(
-                    "after BA-MUDI (Eq. 52)",
-                    AFTER_C,
-                    &d,
-                    &resp.mean[r.clone()],
-                    false,
-                ),
-                series("95% band", BAND_C, &d, &resp.lower[r.clone()], true),
-                series("", BAND_C, &d, &resp.upper[r.clone()], true),
-            ],
-        )?;
+        );
+        // the tangential force has a narrow peak at the contact edge (up to 1e6 lbf/in) that
+        // would flatten the rest: the y range is the 1-99 % quantiles of the plotted values
+        if c == 1 {
+            axes.y_range = Some(quantile_range(
+                all.iter().flat_map(|s| s.points.iter().map(|p| p.1)),
+            ));
+            axes.title.push_str(", peak clipped");
+        }
+        bamudi_gate::report::plot::line_plot(&dir.join(format!("forces_{name}.svg")), &axes, &all)?;
     }
     normal_force_error(&dir, res, cal, model, &scenario, number)?;
     force_history(&dir, res, cal, model, &scenario)?;
@@ -221,12 +198,16 @@ fn normal_force_error(
     };
     line_plot(
         &dir.join("normal_force_error.svg"),
-        &format!("{}: normal-force RMSE over the quoin (Fig. 18)", res.name),
+        &format!(
+            "{}, {}: normal-force RMSE over the quoin (Fig. 18)",
+            res.name,
+            bamudi_gate::coverage::mode_label(cal.config().coefficients)
+        ),
         xl,
         "RMSE (lbf/in)",
         &[
-            series("before BA-MUDI", BEFORE_C, &levels, &eb, true),
-            series("after BA-MUDI", AFTER_C, &levels, &ea, false),
+            series("before BA-MUDI", BEFORE, &levels, &eb, true),
+            series("after BA-MUDI", AFTER, &levels, &ea, false),
         ],
     )
 }
@@ -243,7 +224,8 @@ fn force_history(
     let d = &contact.gate().nu_points;
     let nu = d.len();
     let a_idx = d.partition_point(|&z| z < 0.25 * contact.gate().quoin_height);
-    let hours: Vec<f64> = (0..=168).map(|h| h as f64).collect();
+    // a quarter-hour step: the lockage cycle is 8 h, an hourly step draws it as a zig-zag
+    let hours: Vec<f64> = (0..=4 * 168).map(|q| q as f64 / 4.0).collect();
     let mut cols: [Vec<f64>; 6] = Default::default();
     for &h in &hours {
         let phase = (h / 8.0 * std::f64::consts::TAU).sin();
@@ -260,19 +242,20 @@ fn force_history(
             cols[c + 2].push(a.mean[off + a_idx]);
         }
     }
-    for (c, name) in [(0usize, "normal"), (3, "tangential")] {
+    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
+    for (c, name, fig) in [(0usize, "normal", 21), (3, "tangential", 22)] {
         line_plot(
             &dir.join(format!("history_{name}.svg")),
             &format!(
-                "{}: {name} force at location A (d_u = {:.0} in) over a week (Fig. 22)",
+                "{}, {mode}: {name} force at location A (d_u = {:.0} in) over a week (Fig. {fig})",
                 res.name, d[a_idx]
             ),
             "time (h)",
             "force (lbf/in)",
             &[
-                series("truth", TRUE_C, &hours, &cols[c], false),
-                series("before", BEFORE_C, &hours, &cols[c + 1], true),
-                series("after BA-MUDI", AFTER_C, &hours, &cols[c + 2], false),
+                series("truth", TRUTH, &hours, &cols[c], false),
+                series("before", BEFORE, &hours, &cols[c + 1], true),
+                series("after BA-MUDI", AFTER, &hours, &cols[c + 2], false),
             ],
         )?;
     }

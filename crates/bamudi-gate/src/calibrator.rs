@@ -36,9 +36,10 @@
 
 use crate::error::{GateAppError, Result};
 use bamudi::closeloop::{CalibratedModel, Calibrator, ThetaSummary};
+use bamudi::observe::Observer;
 use bamudi::{
-    BamudiError, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode,
-    EstimatorParams, Experiments, SupportPolicy, calibrate,
+    BamudiError, Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode,
+    EstimatorParams, Experiments, SupportPolicy,
 };
 use mitergate::{ContactModel, GateMultiLevel, MultiLevelSpec};
 use mlmodel::{ObservableModel, UnobservableModel};
@@ -55,6 +56,7 @@ pub struct GateCalibrator {
     config: CalibrationConfig,
     max_experiments: usize,
     gauge_noise_sd: Option<f64>,
+    observer: Option<Arc<dyn Observer + Send + Sync>>,
 }
 
 impl GateCalibrator {
@@ -78,6 +80,7 @@ impl GateCalibrator {
             config,
             max_experiments: 240,
             gauge_noise_sd: None,
+            observer: None,
         })
     }
 
@@ -86,6 +89,12 @@ impl GateCalibrator {
     /// [`gauge_noise_sd`](Self::gauge_noise_sd)).
     pub fn config(mut self, config: CalibrationConfig) -> Self {
         self.config = config;
+        self
+    }
+
+    /// Reports every calibration's stages to `observer` (e.g. progress bars).
+    pub fn observer(mut self, observer: Arc<dyn Observer + Send + Sync>) -> Self {
+        self.observer = Some(observer);
         self
     }
 
@@ -141,7 +150,12 @@ impl GateCalibrator {
             .unwrap_or_else(|| estimated_gauge_noise_sd(y));
         let mut params = self.config.clone().into_params();
         params.sampling = params.sampling.noise_sd(noise_sd);
-        let cal = calibrate(self.model.as_ref(), &exps, &params.check()?)?;
+        let config = params.check()?;
+        let mut run = Calibrate::new(&config);
+        if let Some(o) = &self.observer {
+            run = run.observer(o.as_ref());
+        }
+        let cal = run.run(self.model.as_ref(), &exps)?;
         Ok(CalibratedGate {
             model: Arc::clone(&self.model),
             cal,

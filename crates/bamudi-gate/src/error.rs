@@ -7,7 +7,7 @@ pub enum GateAppError {
     #[error(transparent)]
     Engine(#[from] bamudi::BamudiError),
     /// The gate model (build, condensation, contact, simulators) failed.
-    #[error("gate model: {0}")]
+    #[error(transparent)]
     Gate(#[from] mitergate::GateError),
     /// A model evaluation failed.
     #[error(transparent)]

@@ -8,6 +8,7 @@
 //! * [`calibrator`]: BA-MUDI on the gate as the close loop's [`bamudi::closeloop::Calibrator`];
 //! * [`report`]: `results.json`, `report.md` and SVG plots of a calibration and of a close-loop
 //!   run;
+//! * [`output`]: results directories written atomically (staging directory, then rename);
 //! * [`progress`]: the engine's observer events as indicatif progress bars, and a stderr logger
 //!   for the `log` facade;
 //! * the `bamudi` command line (`src/main.rs`, see `docs/cli.md`).
@@ -23,6 +24,7 @@ pub mod calibrator;
 pub mod coverage;
 pub mod error;
 pub mod gate;
+pub mod output;
 pub mod paper;
 pub mod progress;
 pub mod report;

@@ -22,11 +22,12 @@ use clap::{Parser, Subcommand};
 struct Cli {
     /// Master seed (overrides the config's `seed`; default 2021 for calibration, the scenario
     /// number for `simulate experiments`, 0 for `simulate field`).
-    #[arg(long, global = true)]
+    #[arg(long, global = true, allow_negative_numbers = true)]
     seed: Option<u64>,
-    /// Worker threads of the rayon pool (default: one per core).
-    #[arg(long, global = true)]
-    threads: Option<usize>,
+    /// Worker threads of the rayon pool, in [1, 1024] (default: one per core).
+    #[arg(long, global = true, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: Option<u16>,
     /// Print the engine's diagnostics (log level `info`; `RUST_LOG` sets any level).
     #[arg(long, short, global = true)]
     verbose: bool,
@@ -49,13 +50,26 @@ enum Cmd {
     CloseLoop(cli::closeloop::CloseLoopCmd),
 }
 
-fn main() -> Result<()> {
-    let cli = Cli::parse();
+/// Prints an error as one line of its causes (`error: outer: inner: ...`), without the
+/// backtrace `RUST_BACKTRACE` would add, and exits with status 1.
+fn main() -> std::process::ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
     progress::init_logging(cli.verbose);
+    if let Cmd::Predict(_) = &cli.cmd {
+        refuse_unused_flags(&cli)?;
+    }
     if let Some(t) = cli.threads {
-        anyhow::ensure!(t >= 1, "--threads must be at least 1, got {t}");
         rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
+            .num_threads(usize::from(t))
             .build_global()
             .context("--threads: building the rayon pool")?;
     }
@@ -65,4 +79,23 @@ fn main() -> Result<()> {
         Cmd::Predict(a) => cli::predict::run(a),
         Cmd::CloseLoop(a) => cli::closeloop::run(a, &cli.gate, cli.seed),
     }
+}
+
+/// `predict` uses the gate and settings saved by `calibrate`: a flag it would ignore is an
+/// error, not a silent no-op.
+fn refuse_unused_flags(cli: &Cli) -> Result<()> {
+    let unused = [
+        ("--gate", cli.gate.gate.is_some()),
+        ("--element-size", cli.gate.element_size.is_some()),
+        ("--seed", cli.seed.is_some()),
+        ("--threads", cli.threads.is_some()),
+    ];
+    for (flag, given) in unused {
+        anyhow::ensure!(
+            !given,
+            "{flag} is not used by `predict`: the gate and its settings come from the model.json \
+             written by `calibrate`; remove {flag}"
+        );
+    }
+    Ok(())
 }

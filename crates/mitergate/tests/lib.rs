@@ -5,6 +5,7 @@
 mod contact;
 mod data;
 mod fe;
+mod fuzz;
 mod gate;
 mod inp;
 mod multilevel;

@@ -4,9 +4,14 @@ use super::{GateArgs, build_contact, gate_config};
 use anyhow::{Context, Result};
 use bamudi::CalibrationConfig;
 use bamudi::closeloop::{CloseLoopConfig, CloseLoopReport, MissingPolicy, close_loop};
+use bamudi::observe::Observer;
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
+use bamudi_gate::output::StagedDir;
+use bamudi_gate::progress::Bars;
+use bamudi_gate::report::calibration::ReportInputs;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 /// Arguments of `close-loop`.
 #[derive(Debug, clap::Args)]
@@ -16,7 +21,7 @@ pub struct CloseLoopCmd {
     data: PathBuf,
     /// Fraction of the record (the end, in time) held out for the checks; overrides
     /// `calibration_fraction` of the configuration (`1 - holdout_fraction`).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     holdout_fraction: Option<f64>,
     /// Optional TOML file with a close-loop configuration (missing keys take their defaults).
     #[arg(long)]
@@ -24,18 +29,25 @@ pub struct CloseLoopCmd {
     /// Impute missing gauge values by linear interpolation instead of dropping rows.
     #[arg(long)]
     impute: bool,
-    /// Output directory.
+    /// Output directory (written under a temporary name and renamed when complete; an
+    /// existing non-empty directory is refused unless `--force` is given).
     #[arg(long, default_value = "close-loop-out")]
     out: PathBuf,
-    /// Uniform prior of the gap θ (in), `lo,hi`.
-    #[arg(long, value_delimiter = ',', default_values_t = [40.0, 200.0])]
+    /// Replace an existing non-empty `--out` directory once the new report is complete.
+    #[arg(long)]
+    force: bool,
+    /// Uniform prior of the gap θ (in), `lo,hi` (e.g. `--gap-prior 60,120`).
+    #[arg(long, value_delimiter = ',', num_args = 1, allow_negative_numbers = true,
+          default_values_t = [40.0, 200.0])]
     gap_prior: Vec<f64>,
-    /// Maximum rows per BA-MUDI calibration (evenly thinned in time; the checks use all rows).
-    #[arg(long, default_value_t = 240)]
-    max_experiments: usize,
+    /// Maximum rows per BA-MUDI calibration (evenly thinned in time; the checks use all rows),
+    /// at least 10.
+    #[arg(long, default_value_t = 240, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(10..=100_000))]
+    max_experiments: u32,
     /// Gauge white-noise standard deviation (microstrain), used as the exact estimator's output
     /// noise; estimated from each calibration's rows (first differences) when not given.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     gauge_noise_sd: Option<f64>,
     /// Optional TOML calibration configuration (the keys of `[calibration]` in the
     /// `calibrate` file) for the BA-MUDI calibrations (default: exact linear estimator, 241 θ
@@ -61,9 +73,24 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
         "--data {}: file does not exist",
         c.data.display()
     );
+    if let Some(sd) = c.gauge_noise_sd {
+        anyhow::ensure!(
+            sd.is_finite() && sd > 0.0,
+            "--gauge-noise-sd must be a positive number of microstrain, got {sd}"
+        );
+    }
     let cfg = loop_config(c)?;
-    let contact = build_contact(&gate_config(gate_args)?)?;
-    let calibrator = calibrator(c, contact, (lo, hi), seed)?;
+    let cal_cfg = calibration_config(c)?;
+    let gate_cfg = gate_config(gate_args)?;
+    let top = gate_cfg.geometry.quoin_height;
+    anyhow::ensure!(
+        hi < top,
+        "--gap-prior {lo},{hi}: the upper bound must lie below the quoin height {top} in"
+    );
+    let staged = StagedDir::prepare("--out", &c.out, c.force)?;
+    let contact = build_contact(&gate_cfg)?;
+    let bars: Arc<dyn Observer + Send + Sync> = Arc::new(Bars::new());
+    let calibrator = calibrator(c, cal_cfg, contact, (lo, hi), seed)?.observer(bars);
     let model = calibrator.model();
     let mut ingest = gate::ingest_config(model);
     if c.impute {
@@ -71,11 +98,31 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     }
     let rec = gate::read_record(&c.data, model, &ingest)?;
     let out = close_loop(&rec, &calibrator, &cfg)?;
-    for f in bamudi_gate::report::closeloop::write_report(&out, &c.out)? {
-        eprintln!("wrote {}", f.display());
+    let inputs = ReportInputs {
+        config: c
+            .config
+            .as_ref()
+            .map_or("close-loop defaults".into(), |p| p.display().to_string()),
+        data: c.data.display().to_string(),
+        gate: gate_args
+            .gate
+            .as_ref()
+            .map_or("embedded default gate".into(), |g| g.display().to_string()),
+        element_size_in: gate_cfg.mesh.element_size,
+        gap_prior_in: (lo, hi),
+        seed: calibrator.calibration_config().seed,
+        theta_true: None,
+        warnings: vec![],
+    };
+    let files = bamudi_gate::report::closeloop::write_report(&out, Some(&inputs), staged.path())?;
+    let dir = staged.commit()?;
+    for f in files {
+        if let Some(name) = f.file_name() {
+            eprintln!("wrote {}", dir.join(name).display());
+        }
     }
     print_summary(&out.report);
-    println!("report in {}", c.out.display());
+    println!("report in {}", dir.display());
     Ok(())
 }
 
@@ -84,9 +131,13 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
 fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
     let cfg: CloseLoopConfig = match &c.config {
         Some(p) => {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            toml::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("--config: reading {}", p.display()))?;
+            let cfg: CloseLoopConfig = toml::from_str(&text)
+                .with_context(|| format!("--config: parsing {}", p.display()))?;
+            cfg.validate()
+                .with_context(|| format!("--config {}", p.display()))?;
+            cfg
         }
         None => CloseLoopConfig::default(),
     };
@@ -103,19 +154,29 @@ fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
     Ok(gate::close_loop_config(cfg))
 }
 
+/// The `--calibration-config` file, read and checked.
+fn calibration_config(c: &CloseLoopCmd) -> Result<Option<CalibrationConfig>> {
+    let Some(p) = &c.calibration_config else {
+        return Ok(None);
+    };
+    let text = std::fs::read_to_string(p)
+        .with_context(|| format!("--calibration-config: reading {}", p.display()))?;
+    let cfg = CalibrationConfig::from_toml_str(&text)
+        .with_context(|| format!("--calibration-config {}", p.display()))?;
+    Ok(Some(cfg))
+}
+
 /// The gate calibrator with the command's settings.
 fn calibrator(
     c: &CloseLoopCmd,
+    config: Option<CalibrationConfig>,
     contact: mitergate::ContactModel,
     prior: (f64, f64),
     seed: Option<u64>,
 ) -> Result<GateCalibrator> {
-    let mut calibrator = GateCalibrator::new(contact, prior)?.max_experiments(c.max_experiments);
-    if let Some(p) = &c.calibration_config {
-        let text =
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-        let cfg = CalibrationConfig::from_toml_str(&text)
-            .with_context(|| format!("in {}", p.display()))?;
+    let mut calibrator =
+        GateCalibrator::new(contact, prior)?.max_experiments(c.max_experiments as usize);
+    if let Some(cfg) = config {
         calibrator = calibrator.config(cfg);
     }
     if let Some(sd) = c.gauge_noise_sd {

@@ -6,7 +6,7 @@ pub mod simulate;
 
 use anyhow::{Context, Result};
 use mitergate::{ContactModel, GateConfig};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Gate selection, shared by every subcommand.
 #[derive(Debug, Clone, clap::Args)]
@@ -16,8 +16,48 @@ pub struct GateArgs {
     #[arg(long, global = true)]
     pub gate: Option<PathBuf>,
     /// Override of the mesh element size (in) of the gate (coarser = faster, less accurate).
-    #[arg(long, global = true)]
+    #[arg(long, global = true, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 240.0, Bound::Open, "in"))]
     pub element_size: Option<f64>,
+}
+
+/// Whether the lower end of a [`number_in`] range is allowed.
+#[derive(Debug, Clone, Copy)]
+pub enum Bound {
+    /// `lo` itself is allowed.
+    Closed,
+    /// Only values above `lo`.
+    Open,
+}
+
+/// A clap value parser for a finite number in `[lo, hi]` (or `(lo, hi]`), in `unit`: the
+/// message clap prints names the flag and the allowed range, so limits are checked before
+/// any work and negative numbers reach it (with `allow_negative_numbers`).
+pub fn number_in(
+    lo: f64,
+    hi: f64,
+    lower: Bound,
+    unit: &'static str,
+) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text: &str| {
+        let v: f64 = text
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{text}` is not a number"))?;
+        let above = match lower {
+            Bound::Closed => v >= lo,
+            Bound::Open => v > lo,
+        };
+        if v.is_finite() && above && v <= hi {
+            return Ok(v);
+        }
+        let open = if matches!(lower, Bound::Open) {
+            "("
+        } else {
+            "["
+        };
+        Err(format!("must be in {open}{lo}, {hi}] {unit}, got {text}"))
+    }
 }
 
 /// Reads the gate configuration (file or embedded default) with the element-size override.
@@ -27,10 +67,6 @@ pub fn gate_config(args: &GateArgs) -> Result<GateConfig> {
         None => GateConfig::default(),
     };
     if let Some(h) = args.element_size {
-        anyhow::ensure!(
-            h.is_finite() && h > 0.0,
-            "--element-size must be a positive length in inches, got {h}"
-        );
         cfg.mesh.element_size = h;
         cfg.validate().context("--element-size")?;
     }
@@ -46,9 +82,4 @@ pub fn build_contact(cfg: &GateConfig) -> Result<ContactModel> {
         s.n_dofs, s.element_size
     );
     Ok(contact)
-}
-
-/// Creates an output directory (with its parents).
-pub fn create_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating directory {}", dir.display()))
 }

@@ -16,10 +16,10 @@ pub struct PredictArgs {
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Upstream water level above the sill (in).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub h_up: f64,
     /// Downstream water level above the sill (in).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub h_down: f64,
     /// CSV of the predicted quoin forces (default: `forces_<h_up>_<h_down>.csv` beside the
     /// calibration file).
@@ -48,11 +48,22 @@ pub fn run(a: &PredictArgs) -> Result<()> {
             a.calibration.display()
         )
     })?;
-    let model = saved.multilevel(0)?;
+    let model = saved
+        .multilevel(0)
+        .with_context(|| format!("the model in {}", model_path.display()))?;
+    let x = [a.h_up, a.h_down];
+    model
+        .unobservable
+        .check_input(&x)
+        .context("--h-up / --h-down")?;
+    let out = a
+        .forces_out
+        .clone()
+        .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", a.h_up, a.h_down)));
+    bamudi_gate::output::check_file_destination("--forces-out", &out)?;
     let predictor = cal
         .predictor(&model)
         .with_context(|| format!("{} and {}", a.calibration.display(), model_path.display()))?;
-    let x = [a.h_up, a.h_down];
     let strains = predictor.outputs(&x).with_context(|| {
         format!(
             "predicting strains at h_up = {} in, h_down = {} in",
@@ -68,10 +79,6 @@ pub fn run(a: &PredictArgs) -> Result<()> {
         &strains,
         cal.sigma_eps(),
     );
-    let out = a
-        .forces_out
-        .clone()
-        .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", a.h_up, a.h_down)));
     let z = model.unobservable.coordinates();
     bamudi::data::write_atomic(&out, forces_csv(z, &forces).as_bytes())?;
     println!(

@@ -1,11 +1,12 @@
 //! `bamudi simulate experiments|field`.
-use super::{GateArgs, build_contact, gate_config};
+use super::{Bound, GateArgs, build_contact, gate_config, number_in};
 use anyhow::{Context, Result};
 use bamudi::Experiments;
+use bamudi_gate::output::check_file_destination;
 use mitergate::data::field::{FieldConfig, FieldEffects, MissingValues};
 use mitergate::data::truth::{self, Scenario};
 use nalgebra::DMatrix;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// What to simulate.
 #[derive(Debug, clap::Subcommand)]
@@ -22,13 +23,15 @@ pub enum SimulateCmd {
 #[derive(Debug, clap::Args)]
 pub struct ExperimentsArgs {
     /// Paper scenario: 1 (θ* = 90 in, prior U(81, 105)) or 2 (θ* = 150 in, prior U(135, 165)).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub scenario: u8,
-    /// Number of experiments.
-    #[arg(long, default_value_t = 500)]
-    pub n: usize,
-    /// Noise standard deviation (microstrain).
-    #[arg(long, default_value_t = 1.0)]
+    /// Number of experiments, in [1, 1000000].
+    #[arg(long, default_value_t = 500, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub n: u32,
+    /// Noise standard deviation (microstrain), in [0, 1000].
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 1000.0, Bound::Closed, "microstrain"))]
     pub noise_sd: f64,
     /// Output CSV (`h_up`, `h_down` in inches, one column per gauge in microstrain).
     #[arg(long)]
@@ -38,32 +41,42 @@ pub struct ExperimentsArgs {
 /// Arguments of `simulate field`.
 #[derive(Debug, clap::Args)]
 pub struct FieldArgs {
-    /// Record length (days).
-    #[arg(long, default_value_t = 60.0)]
+    /// Record length (days), in (0, 3650]; at most 200,000 rows in all.
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 3650.0, Bound::Open, "days"))]
     pub days: f64,
-    /// Sampling interval (minutes).
-    #[arg(long, default_value_t = 60.0)]
+    /// Sampling interval (minutes), in [1, 1440].
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true,
+          value_parser = number_in(1.0, 1440.0, Bound::Closed, "minutes"))]
     pub step_minutes: f64,
     /// Effects to switch on (repeat or comma-separate): thermal, drift, offset-jump,
     /// gap-growth, hysteresis, wall-flexure, none.
     #[arg(long, value_delimiter = ',', default_value = "none")]
     pub effect: Vec<String>,
-    /// True bottom gap length (in) at the start of the record.
-    #[arg(long, default_value_t = 90.0)]
+    /// True bottom gap length (in) at the start of the record (the gate's own limits apply).
+    #[arg(long, default_value_t = 90.0, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 10_000.0, Bound::Open, "in"))]
     pub gap: f64,
     /// Gap at the end of the record (in) for the `gap-growth` effect.
-    #[arg(long, default_value_t = 130.0)]
+    #[arg(long, default_value_t = 130.0, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 10_000.0, Bound::Open, "in"))]
     pub final_gap: f64,
-    /// White gauge noise (microstrain).
-    #[arg(long, default_value_t = 1.0)]
+    /// White gauge noise (microstrain), in [0, 1000].
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 1000.0, Bound::Closed, "microstrain"))]
     pub noise_sd: f64,
-    /// Probability that a gauge value is missing (telemetry drop-out).
-    #[arg(long)]
+    /// Probability that a gauge value is missing (telemetry drop-out), in [0, 0.9].
+    #[arg(long, allow_negative_numbers = true,
+          value_parser = number_in(0.0, 0.9, Bound::Closed, "(a probability)"))]
     pub missing: Option<f64>,
     /// Output CSV (see docs/closeloop.md for the columns).
     #[arg(long)]
     pub out: PathBuf,
 }
+
+/// Most rows of a simulated field record (a year at 3-minute steps): every row is a contact
+/// solve, about 2 ms on the default gate.
+const MAX_FIELD_ROWS: f64 = 200_000.0;
 
 /// Runs `simulate`.
 pub fn run(cmd: &SimulateCmd, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
@@ -76,19 +89,19 @@ pub fn run(cmd: &SimulateCmd, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
 fn experiments(a: &ExperimentsArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
     let mut sc = Scenario::paper(a.scenario)
         .context("--scenario")?
-        .n_experiments(a.n)
+        .n_experiments(a.n as usize)
         .noise_sd(a.noise_sd);
     if let Some(s) = seed {
         sc = sc.seed(s);
     }
     sc.validate().context("invalid --n or --noise-sd")?;
+    check_file_destination("--out", &a.out)?;
     let contact = build_contact(&gate_config(gate)?)?;
     let e = truth::generate(&sc, &contact).context("generating the experiments")?;
     let names = contact.gate().gauge_names.clone();
     let x = DMatrix::from_fn(e.x.len(), 2, |i, j| e.x[i][j]);
     let y = DMatrix::from_fn(e.x.len(), names.len(), |i, j| e.strains[i][j]);
     let exps = Experiments::new(vec!["h_up".into(), "h_down".into()], names, x, y)?;
-    ensure_parent(&a.out)?;
     exps.write_csv(&a.out)?;
     eprintln!(
         "wrote {} experiments of {} (true gap {} in, prior U({}, {}) in, seed {}) to {}",
@@ -119,9 +132,18 @@ fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
         .noise_sd(a.noise_sd)
         .gap(a.gap)
         .effects(effects);
-    let contact = build_contact(&gate_config(gate)?)?;
+    let rows = a.days * 1440.0 / a.step_minutes;
+    anyhow::ensure!(
+        rows <= MAX_FIELD_ROWS,
+        "--days {} at --step-minutes {} gives {rows:.0} rows; at most {MAX_FIELD_ROWS} \
+         (shorten the record or sample less often)",
+        a.days,
+        a.step_minutes
+    );
+    check_file_destination("--out", &a.out)?;
+    let gate_cfg = gate_config(gate)?;
+    let contact = build_contact(&gate_cfg)?;
     let rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;
-    ensure_parent(&a.out)?;
     rec.write_csv(&a.out)
         .with_context(|| format!("writing {}", a.out.display()))?;
     eprintln!(
@@ -133,11 +155,4 @@ fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
         a.out.display()
     );
     Ok(())
-}
-
-fn ensure_parent(path: &Path) -> Result<()> {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => super::create_dir(p),
-        _ => Ok(()),
-    }
 }

@@ -339,14 +339,15 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
 }
 
 /// Re-runs Modules 2b-3 of a finished calibration with another coefficient mode (same
-/// fitted estimator, same data) and scores it like the main run.
+/// fitted estimator, same data) and scores it like the main run; returns the scores and the
+/// variant's calibration.
 fn run_variant(
     s: &ScenarioRun<'_>,
     cal: &Calibration,
     main_scores: &Scores,
     mode: CoefficientMode,
     observer: &dyn bamudi::observe::Observer,
-) -> Result<ConditionalResult> {
+) -> Result<(ConditionalResult, Calibration)> {
     let t = Instant::now();
     let cfg: CalibrationConfig = cal
         .config()
@@ -363,7 +364,7 @@ fn run_variant(
     )?;
     let seconds = t.elapsed().as_secs_f64();
     let scores = score(&s.model, &cond, &s.scenario, s.contact, &s.new_x)?;
-    Ok(ConditionalResult {
+    let result = ConditionalResult {
         rho_star: cond.rho_star(),
         theta_posterior: cond.module3().posterior.summary(0),
         force_rmse: scores.force,
@@ -375,7 +376,8 @@ fn run_variant(
         seconds,
         rho_sd: cond.module3().marginal.as_ref().map(|m| m.rho_sd),
         discrepancy: scores.discrepancy,
-    })
+    };
+    Ok((result, cond))
 }
 
 /// One scenario's fixed inputs: the gate, the synthetic truth, the model and the new
@@ -437,7 +439,8 @@ impl<'a> ScenarioRun<'a> {
 const ACCURACY_SAMPLES: usize = 2_000;
 
 /// Runs one scenario (1 or 2) on a built gate, reporting progress to `observer`; returns the
-/// scored result, the calibration and the model.
+/// scored result, the headline calibration (the default marginal mode when it ran, else the
+/// paper's "as published" Module 3) and the model.
 pub fn run_scenario(
     contact: &ContactModel,
     number: u8,
@@ -455,8 +458,11 @@ pub fn run_scenario(
         true => run_variant(&s, &cal, &scores, mode, observer).map(Some),
         false => Ok(None),
     };
-    let conditional = variant(opts.conditional, CoefficientMode::ConditionalOnTheta)?;
-    let marginal = variant(opts.marginal, CoefficientMode::Marginal)?;
+    let conditional = variant(opts.conditional, CoefficientMode::ConditionalOnTheta)?.map(|v| v.0);
+    let (marginal, headline) = match variant(opts.marginal, CoefficientMode::Marginal)? {
+        Some((result, cal)) => (Some(result), Some(cal)),
+        None => (None, None),
+    };
     let sens = match opts.sensitivity {
         true => sensitivity::study(contact, s.scenario.prior, &s.exps, opts)?,
         false => Vec::new(),
@@ -492,7 +498,7 @@ pub fn run_scenario(
         conditional,
         marginal,
     };
-    Ok((result, cal, s.model))
+    Ok((result, headline.unwrap_or(cal), s.model))
 }
 
 /// Runs both scenarios, reporting progress to `observer`. `on_scenario` is called after each

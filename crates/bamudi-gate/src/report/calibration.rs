@@ -19,13 +19,20 @@
 //!   "alpha_hat": [[f; K]; N_e],                  // Eq. 32, rows = experiments
 //!   "gp": [ { "coefficient": k, "noise_variance": f, "log_marginal_likelihood": f } ],
 //!   "covariance": { "size": N_s, "log_det": f, "jitter": f },
-//!   "timings_s": { "training_set_s": f, "estimator_s": f, "rho_s": f, "gp_s": f, "module3_s": f }
+//!   "timings_s": { "training_set_s": f, "estimator_s": f, "rho_s": f, "gp_s": f, "module3_s": f },
+//!   "inputs": { "config": s, "data": s, "gate": s, "element_size_in": f, "gap_prior_in": [lo, hi],
+//!               "seed": int, "version": s, "warnings": [s] }   // added, schema still 1
 //! }
 //! ```
 
+use super::plot::{
+    AFTER, Axes, BEFORE, PRIOR, Series, TRUTH, draw_chart, draw_legend, line_plot, padded_range,
+    svg_figure,
+};
 use crate::error::{GateAppError, Result};
 use bamudi::module2::estimator::CoefficientEstimator;
 use bamudi::module3::likelihood::FactorReport;
+use bamudi::module3::posterior::GridPosterior;
 use bamudi::{Calibration, ThetaPosterior, Timings};
 use plotters::prelude::*;
 use serde::Serialize;
@@ -65,6 +72,29 @@ impl PosteriorSummary {
     }
 }
 
+/// What a calibration was run on, stated in its reports (`results.json` key `inputs`, the
+/// first section of `report.md`), with the warnings of its posterior.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReportInputs {
+    /// Configuration file (or a description of the configuration).
+    pub config: String,
+    /// Data file (or a description of the data).
+    pub data: String,
+    /// Gate configuration file, or `embedded default gate`.
+    pub gate: String,
+    /// Mesh element size (in).
+    pub element_size_in: f64,
+    /// Uniform prior of the gap (in).
+    pub gap_prior_in: (f64, f64),
+    /// Master seed.
+    pub seed: u64,
+    /// The true gap (in) when the data are synthetic and it is known (drawn in the plots).
+    pub theta_true: Option<f64>,
+    /// Warnings about the result (e.g. the posterior's, see
+    /// [`bamudi::module3::posterior::GridWarning`]).
+    pub warnings: Vec<String>,
+}
+
 /// The `results.json` document (see the module docs for the schema).
 #[derive(Debug, Clone, Serialize)]
 pub struct Results {
@@ -78,11 +108,12 @@ pub struct Results {
     gp: Vec<serde_json::Value>,
     covariance: FactorReport,
     timings_s: Timings,
+    inputs: serde_json::Value,
 }
 
 impl Results {
     /// Builds the summary of a calibration.
-    pub fn new(cal: &Calibration, prior_bounds: &[(f64, f64)]) -> Self {
+    pub fn new(cal: &Calibration, prior_bounds: &[(f64, f64)], inputs: &ReportInputs) -> Self {
         let (m2, m3) = (cal.module2(), cal.module3());
         let curve: Vec<serde_json::Value> = m2
             .rho
@@ -112,8 +143,18 @@ impl Results {
                 .collect(),
             covariance: m3.covariance,
             timings_s: cal.timings().clone(),
+            inputs: with_version(inputs),
         }
     }
+}
+
+/// The inputs as JSON with the program version.
+fn with_version(inputs: &ReportInputs) -> serde_json::Value {
+    let mut v = serde_json::to_value(inputs).unwrap_or_default();
+    if let Some(m) = v.as_object_mut() {
+        m.insert("version".into(), env!("CARGO_PKG_VERSION").into());
+    }
+    v
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> GateAppError + '_ {
@@ -123,106 +164,16 @@ fn io(path: &Path) -> impl Fn(std::io::Error) -> GateAppError + '_ {
     }
 }
 
-fn plot_err(file: &Path) -> impl Fn(String) -> GateAppError + '_ {
-    move |reason| GateAppError::plot(file, reason)
-}
-
-fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = vals
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(v), b.max(v))
-        });
-    if !lo.is_finite() {
-        return (0.0, 1.0);
-    }
-    let pad = 0.05 * (hi - lo).max(1e-12 * (1.0 + hi.abs()));
-    (lo - pad, hi + pad)
-}
-
-/// A line plot of several named series on one chart.
-pub fn line_plot(
-    file: &Path,
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[(&str, Vec<(f64, f64)>)],
-) -> Result<()> {
-    let perr = plot_err(file);
-    let root = SVGBackend::new(file, (800, 500)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| perr(e.to_string()))?;
-    let xr = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
-    let yr = range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 20))
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(xr.0..xr.1, yr.0..yr.1)
-        .map_err(|e| perr(e.to_string()))?;
-    chart
-        .configure_mesh()
-        .x_desc(x_label)
-        .y_desc(y_label)
-        .draw()
-        .map_err(|e| perr(e.to_string()))?;
-    let colors = [BLUE, RED, BLACK, GREEN, MAGENTA, CYAN];
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let c = colors[i % colors.len()];
-        chart
-            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
-            .map_err(|e| perr(e.to_string()))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| perr(e.to_string()))?;
-    root.present().map_err(|e| perr(e.to_string()))
-}
-
-/// Discrepancy (or response) reconstruction at one `x`: mean, 95% band, optional truth.
-pub fn band_plot(
-    file: &Path,
-    title: &str,
-    coords: &[f64],
-    band: &bamudi::Band,
-    truth: Option<&[f64]>,
-) -> Result<()> {
-    let n = coords.len();
-    let comps = band.mean.len() / n.max(1);
-    let mut series = Vec::new();
-    let names: Vec<String> = (0..comps)
-        .flat_map(|c| {
-            [
-                format!("mean c{c}"),
-                format!("2.5% c{c}"),
-                format!("97.5% c{c}"),
-                format!("truth c{c}"),
-            ]
-        })
-        .collect();
-    for c in 0..comps {
-        let pick =
-            |v: &[f64]| -> Vec<(f64, f64)> { (0..n).map(|b| (coords[b], v[c * n + b])).collect() };
-        series.push((names[4 * c].as_str(), pick(&band.mean)));
-        series.push((names[4 * c + 1].as_str(), pick(&band.lower)));
-        series.push((names[4 * c + 2].as_str(), pick(&band.upper)));
-        if let Some(t) = truth {
-            series.push((names[4 * c + 3].as_str(), pick(t)));
-        }
-    }
-    line_plot(file, title, "coordinate d_u", "value", &series)
-}
-
 /// Writes `results.json`, `report.md`, `rho_curve.svg`, `theta_posterior.svg` (grid posteriors
 /// only) and `gp_coefficients.svg` into `dir` (created if needed).
-pub fn write_report(cal: &Calibration, prior: &dyn mlmodel::Prior, dir: &Path) -> Result<()> {
+pub fn write_report(
+    cal: &Calibration,
+    prior: &dyn mlmodel::Prior,
+    inputs: &ReportInputs,
+    dir: &Path,
+) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(io(dir))?;
-    let results = Results::new(cal, &prior.bounds());
+    let results = Results::new(cal, &prior.bounds(), inputs);
     let path = dir.join("results.json");
     let text = serde_json::to_string_pretty(&results).map_err(|e| GateAppError::Serde {
         context: path.display().to_string(),
@@ -230,97 +181,240 @@ pub fn write_report(cal: &Calibration, prior: &dyn mlmodel::Prior, dir: &Path) -
     })?;
     bamudi::data::write_atomic(&path, text.as_bytes())?;
     plot_rho(cal, &dir.join("rho_curve.svg"))?;
-    plot_theta(cal, prior, &dir.join("theta_posterior.svg"))?;
+    plot_theta(
+        cal,
+        prior,
+        inputs.theta_true,
+        &dir.join("theta_posterior.svg"),
+    )?;
     plot_gp_coefficients(cal, &dir.join("gp_coefficients.svg"))?;
-    let md = report_markdown(cal, &results);
+    let md = report_markdown(cal, inputs);
     Ok(bamudi::data::write_atomic(
         &dir.join("report.md"),
         md.as_bytes(),
     )?)
 }
 
-/// The normalised likelihood of `ρ` (Eq. 30, Fig. 13).
+/// The force scale `ρ` (Fig. 13): in the marginal mode its posterior (a mixture over the `θ`
+/// support of the Gaussians of `ρ` given `θ`), otherwise Module 2's normalised likelihood
+/// (Eq. 30) zoomed to where it is above 1e-3 of its peak; Module 2's `ρ*` marked.
 fn plot_rho(cal: &Calibration, path: &Path) -> Result<()> {
     let rho = &cal.module2().rho;
-    let pts: Vec<(f64, f64)> = rho
-        .grid
-        .iter()
-        .zip(&rho.likelihood)
-        .map(|(p, l)| (p.rho, *l))
-        .collect();
-    line_plot(
-        path,
-        "Normalised likelihood of rho (Eq. 30)",
-        "rho",
-        "density",
-        &[("L(rho)", pts)],
-    )
+    let module2_star = rho.rho_star;
+    let (title, pts) = match &cal.module3().marginal {
+        Some(m) => (
+            "Posterior of the force scale ρ (marginal mode)",
+            rho_mixture(m),
+        ),
+        None => {
+            let pts: Vec<(f64, f64)> = rho
+                .grid
+                .iter()
+                .zip(&rho.likelihood)
+                .map(|(p, l)| (p.rho, *l))
+                .collect();
+            (
+                "Likelihood of the force scale ρ (Eq. 30, Fig. 13)",
+                zoom_to_peak(pts),
+            )
+        }
+    };
+    let peak = pts.iter().fold(0.0f64, |m, p| m.max(p.1));
+    let axes = Axes::new(
+        title,
+        "ρ (scale of the nominal contact force, dimensionless)",
+        "density (1/ρ)",
+    );
+    let series = [
+        Series::new("ρ", AFTER, pts),
+        Series::new(
+            &format!("Module 2 ρ* = {module2_star:.4} (Eq. 30)"),
+            TRUTH,
+            vec![(module2_star, 0.0), (module2_star, peak)],
+        )
+        .dashed(),
+    ];
+    line_plot(path, &axes, &series)
 }
 
-/// The `θ` posteriors with and without the discrepancy and the prior (Fig. 16; grid
-/// posteriors only).
-fn plot_theta(cal: &Calibration, prior: &dyn mlmodel::Prior, path: &Path) -> Result<()> {
+/// The points whose value is at least 1e-3 of the peak, with one neighbour on each side.
+fn zoom_to_peak(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
+    let peak = pts.iter().fold(0.0f64, |m, p| m.max(p.1));
+    let above: Vec<usize> = (0..pts.len())
+        .filter(|&i| pts[i].1 >= 1e-3 * peak)
+        .collect();
+    match (above.first(), above.last()) {
+        (Some(&lo), Some(&hi)) => pts[lo.saturating_sub(1)..(hi + 2).min(pts.len())].to_vec(),
+        _ => pts,
+    }
+}
+
+/// The marginal mode's `ρ` posterior on 200 points over its mean ± 5 sd (within the prior).
+fn rho_mixture(m: &bamudi::module3::marginal::MarginalFit) -> Vec<(f64, f64)> {
+    let lo = (m.rho_mean - 5.0 * m.rho_sd).max(m.rho_prior.0);
+    let hi = (m.rho_mean + 5.0 * m.rho_sd).min(m.rho_prior.1);
+    let total: f64 = m
+        .nodes
+        .iter()
+        .map(|n| n.weight)
+        .sum::<f64>()
+        .max(f64::MIN_POSITIVE);
+    (0..200)
+        .map(|i| {
+            let r = lo + (hi - lo) * i as f64 / 199.0;
+            let d: f64 = m
+                .nodes
+                .iter()
+                .map(|n| {
+                    let v = n.rho_var.max(1e-300);
+                    n.weight * (-(r - n.rho_mean).powi(2) / (2.0 * v)).exp()
+                        / (std::f64::consts::TAU * v).sqrt()
+                })
+                .sum();
+            (r, d / total)
+        })
+        .collect()
+}
+
+/// The `θ` quantile `p` of a grid posterior (first node whose CDF reaches `p`).
+fn grid_quantile(g: &GridPosterior, p: f64) -> f64 {
+    let i = g.cdf.partition_point(|c| *c < p).min(g.theta.len() - 1);
+    g.theta[i]
+}
+
+/// The `θ` posteriors (Fig. 16; grid posteriors only), each in its own panel so that a
+/// posterior piled at a prior bound (common without the discrepancy) does not flatten the
+/// other; the x range spans both posteriors' 0.1-99.9 % quantiles (and the truth if known).
+fn plot_theta(
+    cal: &Calibration,
+    prior: &dyn mlmodel::Prior,
+    truth: Option<f64>,
+    path: &Path,
+) -> Result<()> {
     let m3 = cal.module3();
     let (ThetaPosterior::Grid(w), ThetaPosterior::Grid(wo)) =
         (&m3.posterior, &m3.posterior_no_discrepancy)
     else {
         return Ok(());
     };
-    let prior_pts: Vec<(f64, f64)> = w
-        .theta
-        .iter()
-        .map(|t| (*t, prior.ln_pdf(&[*t]).exp()))
-        .collect();
-    let curve = |g: &bamudi::module3::posterior::GridPosterior| -> Vec<(f64, f64)> {
-        g.theta
-            .iter()
-            .copied()
-            .zip(g.density.iter().copied())
-            .collect()
-    };
-    line_plot(
-        path,
-        "Posterior of theta (Fig. 16)",
-        "theta",
-        "density",
-        &[
-            ("with discrepancy", curve(w)),
-            ("without discrepancy", curve(wo)),
-            ("prior", prior_pts),
-        ],
-    )
+    let ends = [w, wo].map(|g| [grid_quantile(g, 0.001), grid_quantile(g, 0.999)]);
+    let x_range = padded_range(ends.into_iter().flatten().chain(truth));
+    svg_figure(path, (960, 720), |root| {
+        let (panels, legend) = root.split_horizontally(730);
+        let (top, bottom) = panels.split_vertically(360);
+        let panel = |g: &GridPosterior, title: &str, color| {
+            let peak = g.density.iter().fold(0.0f64, |m, d| m.max(*d));
+            let prior_pts: Vec<(f64, f64)> = g
+                .theta
+                .iter()
+                .map(|t| (*t, prior.ln_pdf(&[*t]).exp()))
+                .collect();
+            let mut series = vec![
+                Series::xy("posterior", color, &g.theta, &g.density),
+                Series::new("prior", PRIOR, prior_pts).dashed(),
+            ];
+            if let Some(t) = truth {
+                series.push(
+                    Series::new("truth θ*", TRUTH, vec![(t, 0.0), (t, 1.05 * peak)]).dashed(),
+                );
+            }
+            let mut axes = Axes::new(title, "gap θ (in)", "posterior density (1/in)");
+            (axes.x_range, axes.y_range) = (Some(x_range), Some((0.0, 1.1 * peak)));
+            (axes, series)
+        };
+        let (a, s_top) = panel(
+            w,
+            "θ posterior with the discrepancy (the calibration's answer)",
+            AFTER,
+        );
+        draw_chart(&top, &a, &s_top)?;
+        let (a, s_bottom) = panel(
+            wo,
+            "θ posterior without the discrepancy (δ = 0, for comparison)",
+            BEFORE,
+        );
+        draw_chart(&bottom, &a, &s_bottom)?;
+        let mut entries = vec![
+            Series::new("with discrepancy", AFTER, vec![]),
+            Series::new("without discrepancy", BEFORE, vec![]),
+        ];
+        entries.extend(s_top.into_iter().skip(1));
+        draw_legend(&legend, &entries)
+    })
 }
 
-/// Coefficient estimates and GP means along the first input, at the experiments (Fig. 14).
+/// One panel per discrepancy coefficient: the estimates `α̂_k` at the experiments (Eq. 32)
+/// against the coefficient GP's mean there (Fig. 14 as a parity plot: points on the diagonal
+/// are reproduced by the GP, spread off it is what the GP treats as noise).
 fn plot_gp_coefficients(cal: &Calibration, path: &Path) -> Result<()> {
     let x = cal.x_experiments();
     let gps = cal.coefficient_gps();
     let (mu, _) = gps.predict(x)?;
-    let mut order: Vec<usize> = (0..x.nrows()).collect();
-    order.sort_by(|a, b| x[(*a, 0)].total_cmp(&x[(*b, 0)]));
-    let names: Vec<String> = (0..gps.len())
-        .flat_map(|k| [format!("alpha_hat {k}"), format!("GP mean {k}")])
-        .collect();
-    let mut series = Vec::new();
-    for k in 0..gps.len() {
-        let along = |v: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
-            order.iter().map(|&i| (x[(i, 0)], v(i))).collect()
-        };
-        series.push((names[2 * k].as_str(), along(&|i| cal.alpha_hat()[(i, k)])));
-        series.push((names[2 * k + 1].as_str(), along(&|i| mu[(i, k)])));
-    }
-    line_plot(
-        path,
-        "Coefficient estimates and GP means (Fig. 14)",
-        &cal.input_names()[0],
-        "alpha",
-        &series,
-    )
+    let k_total = gps.len();
+    let cols = 4usize;
+    let rows = k_total.div_ceil(cols).max(1);
+    svg_figure(path, (1200, 280 * rows as u32 + 40), |root| {
+        let (head, body) = root.split_vertically(40);
+        head.draw(&Text::new(
+        "Coefficient estimates α̂ (Eq. 32) against the coefficient GPs' means (Eq. 33-37, Fig. 14), lbf/in",
+        (12, 12),
+        ("sans-serif", 18),
+    ))?;
+        for (k, area) in body
+            .split_evenly((rows, cols))
+            .iter()
+            .enumerate()
+            .take(k_total)
+        {
+            let pts: Vec<(f64, f64)> = (0..x.nrows())
+                .map(|i| (cal.alpha_hat()[(i, k)], mu[(i, k)]))
+                .collect();
+            let r = padded_range(pts.iter().flat_map(|p| [p.0, p.1]));
+            let mut axes = Axes::new(
+                &format!("coefficient {k}"),
+                "α̂ (lbf/in)",
+                "GP mean (lbf/in)",
+            );
+            (axes.x_range, axes.y_range) = (Some(r), Some(r));
+            let series = [
+                Series::new("", PRIOR, vec![(r.0, r.0), (r.1, r.1)]).dashed(),
+                Series::scatter("", AFTER, pts),
+            ];
+            draw_chart(area, &axes, &series)?;
+        }
+        Ok(())
+    })
 }
 
-fn report_markdown(cal: &Calibration, _r: &Results) -> String {
+/// The report's first section: what the calibration was run on, and its warnings.
+pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
+    let mut s = format!(
+        "## Inputs\n\n* configuration: `{}`\n* data: `{}` (water levels in in, strains in microstrain)\n\
+         * gate: {}, mesh element size {} in\n* gap prior: U({}, {}) in\n* seed: {}\n\
+         * bamudi {}\n\n",
+        i.config,
+        i.data,
+        i.gate,
+        i.element_size_in,
+        i.gap_prior_in.0,
+        i.gap_prior_in.1,
+        i.seed,
+        env!("CARGO_PKG_VERSION")
+    );
+    if !i.warnings.is_empty() {
+        s += "## Warnings\n\n";
+        for w in &i.warnings {
+            s += &format!("* {w}\n");
+        }
+        s += "\n";
+    }
+    s + "## Results\n\n"
+}
+
+fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
     let (m2, m3) = (cal.module2(), cal.module3());
     let mut s = String::from("# BA-MUDI calibration report\n\n");
+    s += &inputs_markdown(inputs);
     s += &format!(
         "* estimator: `{}` (training pool: {} distinct x)\n",
         m2.estimator.name(),
@@ -332,7 +426,7 @@ fn report_markdown(cal: &Calibration, _r: &Results) -> String {
         m2.rho.objective_at_star
     );
     s += &format!(
-        "* sigma_eps = {:.4} ({})\n",
+        "* sigma_eps = {:.4} microstrain ({})\n",
         m3.sigma_eps,
         if m3.sigma_eps_estimated {
             "estimated from Module-2 residuals"
@@ -344,7 +438,7 @@ fn report_markdown(cal: &Calibration, _r: &Results) -> String {
         "* covariance V: {} x {}, ln|V| = {:.3}, jitter = {:e}\n\n",
         m3.covariance.size, m3.covariance.size, m3.covariance.log_det, m3.covariance.jitter
     );
-    s += "| posterior of theta | mean | sd | 95% interval |\n|---|---|---|---|\n";
+    s += "| posterior of the gap θ (in) | mean | sd | 95% interval |\n|---|---|---|---|\n";
     for (name, p) in [
         ("with discrepancy", &m3.posterior),
         ("without discrepancy", &m3.posterior_no_discrepancy),

@@ -1,14 +1,12 @@
 //! The close loop's report on a gate record: `report.md`, `results.json` and SVG plots.
 
+use super::calibration::{ReportInputs, inputs_markdown};
+use super::plot::{AFTER, BEFORE, Series, draw_legend, svg_figure, tick};
 use crate::error::{GateAppError, Result};
 use bamudi::closeloop::{CloseLoopOutcome, CloseLoopReport};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-fn plot_err(path: &Path, e: impl std::fmt::Display) -> GateAppError {
-    GateAppError::plot(path, e)
-}
 
 /// Markdown summary of a report (the before/after table, the effects and every step).
 ///
@@ -141,14 +139,24 @@ fn checks_section(s: &mut String, r: &CloseLoopReport) {
 /// `residual_vs_<covariate>.svg` per accepted effect into `dir` (created if needed); returns the
 /// written paths.
 ///
-pub fn write_report(out: &CloseLoopOutcome, dir: &Path) -> Result<Vec<PathBuf>> {
+pub fn write_report(
+    out: &CloseLoopOutcome,
+    inputs: Option<&ReportInputs>,
+    dir: &Path,
+) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| GateAppError::Io {
         path: dir.display().to_string(),
         source,
     })?;
     let mut files = vec![];
     let md = dir.join("report.md");
-    bamudi::data::write_atomic(&md, markdown(&out.report).as_bytes())?;
+    let mut text = markdown(&out.report);
+    if let Some(i) = inputs {
+        // the inputs go right under the title line
+        let at = text.find('\n').map_or(text.len(), |k| k + 1);
+        text.insert_str(at, &format!("\n{}", inputs_markdown(i)));
+    }
+    bamudi::data::write_atomic(&md, text.as_bytes())?;
     files.push(md);
     let js = dir.join("results.json");
     let text = serde_json::to_string_pretty(&out.report).map_err(|e| GateAppError::Serde {
@@ -158,10 +166,10 @@ pub fn write_report(out: &CloseLoopOutcome, dir: &Path) -> Result<Vec<PathBuf>> 
     bamudi::data::write_atomic(&js, text.as_bytes())?;
     files.push(js);
     let p = dir.join("rmse.svg");
-    plot_rmse(&out.report, &p).map_err(|e| plot_err(&p, e))?;
+    plot_rmse(&out.report, &p)?;
     files.push(p);
     let p = dir.join("theta.svg");
-    plot_theta(&out.report, &p).map_err(|e| plot_err(&p, e))?;
+    plot_theta(&out.report, &p)?;
     files.push(p);
     let mut seen = vec![];
     for cov in &out.effect_plot_covariates {
@@ -170,100 +178,114 @@ pub fn write_report(out: &CloseLoopOutcome, dir: &Path) -> Result<Vec<PathBuf>> 
         }
         seen.push(cov.clone());
         let p = dir.join(format!("residual_vs_{cov}.svg"));
-        plot_residual_vs(out, cov, &p).map_err(|e| plot_err(&p, e))?;
+        plot_residual_vs(out, cov, &p)?;
         files.push(p);
     }
     Ok(files)
 }
 
-type PlotResult = std::result::Result<(), Box<dyn std::error::Error>>;
-
-fn plot_rmse(r: &CloseLoopReport, path: &Path) -> PlotResult {
-    let root = SVGBackend::new(path, (720, 420)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let ng = r.gauge_names.len();
-    let ymax = r
-        .heldout_rmse_before
-        .iter()
-        .chain(&r.heldout_rmse_after)
-        .fold(0.0f64, |a, b| a.max(*b))
-        * 1.15
-        + 1e-9;
-    let mut ch = ChartBuilder::on(&root)
-        .caption(
-            "Held-out RMSE per gauge (microstrain): before (red) / after (blue)",
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(0.0..ng as f64, 0.0..ymax)?;
-    ch.configure_mesh()
-        .x_labels(ng)
-        .x_label_formatter(&|v| {
-            r.gauge_names
-                .get(v.floor() as usize)
-                .cloned()
-                .unwrap_or_default()
-        })
-        .y_desc("RMSE (microstrain)")
-        .draw()?;
-    for (k, (b, a)) in r
-        .heldout_rmse_before
-        .iter()
-        .zip(&r.heldout_rmse_after)
-        .enumerate()
-    {
-        let x = k as f64;
-        ch.draw_series([
-            Rectangle::new([(x + 0.1, 0.0), (x + 0.45, *b)], RED.filled()),
-            Rectangle::new([(x + 0.55, 0.0), (x + 0.9, *a)], BLUE.filled()),
-        ])?;
-    }
-    root.present()?;
-    Ok(())
+/// Held-out RMSE per gauge, before and after the loop: one group of two bars per gauge,
+/// every gauge named under its group.
+fn plot_rmse(r: &CloseLoopReport, path: &Path) -> Result<()> {
+    svg_figure(path, (960, 460), |root| {
+        let (plot, legend) = root.split_horizontally(760);
+        let ng = r.gauge_names.len();
+        let ymax = r
+            .heldout_rmse_before
+            .iter()
+            .chain(&r.heldout_rmse_after)
+            .fold(0.0f64, |a, b| a.max(*b))
+            * 1.15
+            + 1e-9;
+        let mut ch = ChartBuilder::on(&plot)
+            .caption(
+                "Held-out RMSE per gauge, before and after the loop",
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(70)
+            // plotters' integer ranges include their end: 0..ng-1 holds the ng gauges
+            .build_cartesian_2d((0..ng.saturating_sub(1)).into_segmented(), 0.0..ymax)?;
+        ch.configure_mesh()
+            .disable_x_mesh()
+            .x_labels(ng + 1)
+            .x_label_formatter(&|v| match v {
+                SegmentValue::CenterOf(i) => r.gauge_names.get(*i).cloned().unwrap_or_default(),
+                _ => String::new(),
+            })
+            .x_desc("gauge")
+            .y_desc("RMSE (microstrain)")
+            .y_label_formatter(&tick)
+            .draw()?;
+        ch.draw_series(r.heldout_rmse_before.iter().enumerate().map(|(k, v)| {
+            Rectangle::new(
+                [
+                    (SegmentValue::Exact(k), 0.0),
+                    (SegmentValue::CenterOf(k), *v),
+                ],
+                BEFORE.filled(),
+            )
+        }))?;
+        ch.draw_series(r.heldout_rmse_after.iter().enumerate().map(|(k, v)| {
+            Rectangle::new(
+                [
+                    (SegmentValue::CenterOf(k), 0.0),
+                    (SegmentValue::Exact(k + 1), *v),
+                ],
+                AFTER.filled(),
+            )
+        }))?;
+        draw_legend(
+            &legend,
+            &[
+                Series::new("before the loop", BEFORE, vec![]),
+                Series::new("after the loop", AFTER, vec![]),
+            ],
+        )?;
+        Ok(())
+    })
 }
 
-fn plot_theta(r: &CloseLoopReport, path: &Path) -> PlotResult {
-    let root = SVGBackend::new(path, (520, 400)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (lo, hi) = (
-        r.theta_before.ci95.0.min(r.theta_after.ci95.0),
-        r.theta_before.ci95.1.max(r.theta_after.ci95.1),
-    );
-    let pad = 0.1 * (hi - lo).max(1.0);
-    let mut ch = ChartBuilder::on(&root)
-        .caption(
-            "Gap θ (in): mean and 95 % interval, before / after",
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(0.0..2.0, (lo - pad)..(hi + pad))?;
-    ch.configure_mesh()
-        .x_labels(2)
-        .x_label_formatter(&|v| {
-            if *v < 1.0 {
-                "before".into()
-            } else {
-                "after".into()
-            }
-        })
-        .y_desc("gap (in)")
-        .draw()?;
-    for (k, t, c) in [(0.5, &r.theta_before, RED), (1.5, &r.theta_after, BLUE)] {
-        ch.draw_series([PathElement::new(
-            vec![(k, t.ci95.0), (k, t.ci95.1)],
-            c.stroke_width(3),
-        )])?;
-        ch.draw_series([Circle::new((k, t.mean), 6, c.filled())])?;
-    }
-    root.present()?;
-    Ok(())
+/// The gap before and after the loop: mean and 95 % interval, one column each.
+fn plot_theta(r: &CloseLoopReport, path: &Path) -> Result<()> {
+    svg_figure(path, (560, 420), |root| {
+        let (lo, hi) = (
+            r.theta_before.ci95.0.min(r.theta_after.ci95.0),
+            r.theta_before.ci95.1.max(r.theta_after.ci95.1),
+        );
+        let pad = 0.1 * (hi - lo).max(1.0);
+        let mut ch = ChartBuilder::on(root)
+            .caption("Gap θ: mean and 95 % interval", ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(70)
+            // plotters' integer ranges include their end: 0..1 holds the two columns
+            .build_cartesian_2d((0..1usize).into_segmented(), (lo - pad)..(hi + pad))?;
+        ch.configure_mesh()
+            .disable_x_mesh()
+            .x_labels(3)
+            .x_label_formatter(&|v| match v {
+                SegmentValue::CenterOf(0) => "before the loop".into(),
+                SegmentValue::CenterOf(1) => "after the loop".into(),
+                _ => String::new(),
+            })
+            .y_desc("gap θ (in)")
+            .y_label_formatter(&tick)
+            .draw()?;
+        for (k, t, c) in [(0, &r.theta_before, BEFORE), (1, &r.theta_after, AFTER)] {
+            let x = SegmentValue::CenterOf(k);
+            ch.draw_series([PathElement::new(
+                vec![(x.clone(), t.ci95.0), (x.clone(), t.ci95.1)],
+                c.stroke_width(3),
+            )])?;
+            ch.draw_series([Circle::new((x, t.mean), 6, c.filled())])?;
+        }
+        Ok(())
+    })
 }
 
-fn plot_residual_vs(out: &CloseLoopOutcome, cov: &str, path: &Path) -> PlotResult {
+fn plot_residual_vs(out: &CloseLoopOutcome, cov: &str, path: &Path) -> Result<()> {
     let Some((_, xs)) = out.features.iter().find(|(n, _)| n == cov) else {
         return Ok(());
     };
@@ -291,34 +313,35 @@ fn plot_residual_vs(out: &CloseLoopOutcome, cov: &str, path: &Path) -> PlotResul
         .fold(0.0f64, |a, p| a.max(p.1.abs()))
         * 1.1
         + 1e-9;
-    let root = SVGBackend::new(path, (720, 460)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut ch = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "Held-out residual of {} vs {cov}: before (red), after (blue)",
-                r.gauge_names[g]
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(10)
-        .x_label_area_size(35)
-        .y_label_area_size(55)
-        .build_cartesian_2d(xmin..(xmax + 1e-9), -ymax..ymax)?;
-    ch.configure_mesh()
-        .x_desc(cov)
-        .y_desc("residual (microstrain)")
-        .draw()?;
-    ch.draw_series(
-        before
-            .iter()
-            .map(|p| Circle::new(*p, 2, RED.mix(0.5).filled())),
-    )?;
-    ch.draw_series(
-        after
-            .iter()
-            .map(|p| Circle::new(*p, 2, BLUE.mix(0.6).filled())),
-    )?;
-    root.present()?;
-    Ok(())
+    svg_figure(path, (720, 460), |root| {
+        let mut ch = ChartBuilder::on(root)
+            .caption(
+                format!(
+                    "Held-out residual of {} against {cov}: before (red) and after (blue) the loop",
+                    r.gauge_names[g]
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(10)
+            .x_label_area_size(35)
+            .y_label_area_size(55)
+            .build_cartesian_2d(xmin..(xmax + 1e-9), -ymax..ymax)?;
+        ch.configure_mesh()
+            .x_desc(cov)
+            .y_desc(format!("residual of {} (microstrain)", r.gauge_names[g]))
+            .x_label_formatter(&tick)
+            .y_label_formatter(&tick)
+            .draw()?;
+        ch.draw_series(
+            before
+                .iter()
+                .map(|p| Circle::new(*p, 2, BEFORE.mix(0.5).filled())),
+        )?;
+        ch.draw_series(
+            after
+                .iter()
+                .map(|p| Circle::new(*p, 2, AFTER.mix(0.6).filled())),
+        )?;
+        Ok(())
+    })
 }

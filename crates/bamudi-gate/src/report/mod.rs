@@ -3,3 +3,4 @@
 
 pub mod calibration;
 pub mod closeloop;
+pub mod plot;

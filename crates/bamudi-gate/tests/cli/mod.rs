@@ -1,5 +1,8 @@
 //! The `bamudi` binary: clear errors for bad input, and a small simulate -> calibrate ->
 //! predict round trip on a coarse gate (60 in elements, so it runs in seconds).
+mod corpus;
+mod docs;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -47,6 +50,8 @@ fn fails_naming(args: &[&str], pieces: &[&str]) {
 fn bad_arguments_and_files_are_clear_errors() {
     let d = dir("bad");
     let gate = coarse_gate(&d);
+    // `--out` must not be a non-empty directory (that is its own error, tested in the corpus)
+    let fresh = d.join("results");
     fails_naming(
         &["simulate", "field", "--effect", "rain", "--out", "x.csv"],
         &["unknown effect `rain`", "thermal"],
@@ -71,7 +76,7 @@ fn bad_arguments_and_files_are_clear_errors() {
             "--data",
             "x.csv",
             "--out",
-            s(&d),
+            s(&fresh),
         ],
         &["nope.toml"],
     );
@@ -85,7 +90,7 @@ fn bad_arguments_and_files_are_clear_errors() {
             "--data",
             "x.csv",
             "--out",
-            s(&d),
+            s(&fresh),
         ],
         &["bad_prior.toml", "gap_prior"],
     );
@@ -103,7 +108,7 @@ fn bad_arguments_and_files_are_clear_errors() {
             "--data",
             "x.csv",
             "--out",
-            s(&d),
+            s(&fresh),
         ],
         &["typo.toml", "theta_grid"],
     );
@@ -125,7 +130,7 @@ fn bad_arguments_and_files_are_clear_errors() {
             "--data",
             s(&csv),
             "--out",
-            s(&d),
+            s(&fresh),
         ],
         &["bad_row.csv", "line 3", "`SG3`"],
     );
@@ -225,6 +230,51 @@ fn simulate_calibrate_predict_round_trip_on_a_coarse_gate() {
         sd < 3.0,
         "posterior sd {sd} in: the data did not inform θ\n{stdout}"
     );
+
+    // the report states its inputs; a second run into the same --out is refused, and with
+    // --force replaces it whole (no stale file of the first run survives)
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    for piece in [
+        "## Inputs",
+        "exps.csv",
+        "U(81, 105) in",
+        "element size 60 in",
+    ] {
+        assert!(
+            report.contains(piece),
+            "report.md lacks `{piece}`:\n{report}"
+        );
+    }
+    std::fs::write(out.join("stale.txt"), "from an earlier run").unwrap();
+    let again = |force: bool| {
+        let mut args = vec![
+            "calibrate",
+            "--gate",
+            &gate,
+            "--config",
+            s(&cfg),
+            "--data",
+            s(&exps),
+        ];
+        args.extend(["--out", s(&out)]);
+        if force {
+            args.push("--force");
+        }
+        bamudi(&args)
+    };
+    let o = again(false);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--force"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        out.join("stale.txt").exists(),
+        "a refused run must not touch the old result"
+    );
+    let o = again(true);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("stale.txt").exists() && out.join("calibration.json").exists());
 
     let forces = d.join("forces.csv");
     let o = bamudi(&[

@@ -198,7 +198,9 @@ impl CloseLoopConfig {
         self
     }
 
-    pub(crate) fn validate(&self) -> Result<(), BamudiError> {
+    /// Checks every field (errors name the key and say what is allowed); the loop checks its
+    /// configuration itself, this lets a caller check it before any work.
+    pub fn validate(&self) -> Result<(), BamudiError> {
         let bad = |name, reason: String| Err(BamudiError::InvalidConfig { name, reason });
         if !(self.calibration_fraction > 0.0 && self.calibration_fraction < 1.0) {
             return bad(

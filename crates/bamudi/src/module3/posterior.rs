@@ -213,6 +213,11 @@ pub struct GridPosterior {
     pub map: f64,
     /// Equal-tailed 95% credible interval, from the CDF (linear interpolation).
     pub ci95: (f64, f64),
+    /// The nodes the log density was evaluated at (the grid itself, or the coarser nodes of
+    /// an [`interpolated`](Self::interpolated) posterior); [`warnings`](Self::warnings)
+    /// judges the resolution by them.
+    #[serde(default)]
+    pub evaluated: Vec<f64>,
 }
 
 impl GridPosterior {
@@ -285,6 +290,7 @@ impl GridPosterior {
         };
         let ci95 = (quantile(0.025), quantile(0.975));
         Ok(Self {
+            evaluated: theta.clone(),
             theta,
             log_density,
             density,
@@ -380,7 +386,9 @@ impl GridPosterior {
         }
         t_out.push(theta[n - 1]);
         l_out.push(log_density[n - 1]);
-        Self::new(t_out, l_out)
+        let mut post = Self::new(t_out, l_out)?;
+        post.evaluated = theta.to_vec();
+        Ok(post)
     }
 
     /// Probability masses of the nodes (trapezoid weights times density), summing to one.
@@ -407,6 +415,124 @@ impl GridPosterior {
                 0.5 * (left + right) * self.density[i]
             })
             .collect()
+    }
+}
+
+/// Why a grid posterior's summary should not be taken at face value. Checked by
+/// [`GridPosterior::warnings`]; the command line prints them and writes them to its reports.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum GridWarning {
+    /// The posterior density at a bound of the prior is more than
+    /// [`BOUND_DENSITY_FRACTION`] of its peak: the prior cuts the posterior off, the data may
+    /// favour a `θ` outside the prior, and the bound then decides the answer.
+    AtPriorBound {
+        /// The bound.
+        bound: f64,
+        /// Density at the bound over the peak density.
+        density_ratio: f64,
+    },
+    /// The 95 % interval spans fewer than [`MIN_RESOLVED_SPACINGS`] evaluated node spacings
+    /// (the widest one overlapping it):
+    /// the posterior's shape between nodes is the interpolant's assumption (a quadratic log
+    /// density), not a computed value.
+    UnderResolved {
+        /// Width of the 95 % interval.
+        ci_width: f64,
+        /// Spacing of the evaluated grid nodes.
+        spacing: f64,
+    },
+}
+
+/// Density at a prior bound, relative to the posterior's peak, above which the prior is taken
+/// to cut the posterior off: 0.15 is the ratio of a Gaussian posterior whose mode lies 1.95 sd
+/// inside the bound, where the prior starts to remove a visible share (2.5 %) of the likelihood.
+pub const BOUND_DENSITY_FRACTION: f64 = 0.15;
+
+/// Fewest evaluated node spacings a 95 % interval must span before its grid is taken as
+/// resolving it: 3 spacings is 1.3 sd per node for a Gaussian posterior, the coarsest spacing
+/// at which [`GridPosterior::interpolated`] is documented to recover the CDF to 0.003.
+pub const MIN_RESOLVED_SPACINGS: f64 = 3.0;
+
+impl std::fmt::Display for GridWarning {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::AtPriorBound {
+                bound,
+                density_ratio,
+            } => write!(
+                f,
+                "the posterior density at the prior bound {bound} is {:.0} % of its peak: the \
+                 prior cuts the posterior off, the data may favour a value beyond it, and the \
+                 bound decides the answer; widen the prior",
+                100.0 * density_ratio
+            ),
+            Self::UnderResolved { ci_width, spacing } => write!(
+                f,
+                "the 95 % interval ({ci_width:.3} wide) spans fewer than {MIN_RESOLVED_SPACINGS} \
+                 grid spacings ({spacing:.3}): the posterior is under-resolved; raise \
+                 `theta_grid_points`"
+            ),
+        }
+    }
+}
+
+impl GridPosterior {
+    /// The warnings of this posterior given the prior's bounds: a density at a bound (the
+    /// grid's end nodes, when they are the bounds) above [`BOUND_DENSITY_FRACTION`] of the
+    /// peak, or a 95 % interval narrower than [`MIN_RESOLVED_SPACINGS`] times the widest
+    /// spacing of the [`evaluated`](Self::evaluated) nodes that overlaps it.
+    ///
+    /// ```
+    /// use bamudi::module3::posterior::{GridPosterior, GridWarning};
+    /// let theta: Vec<f64> = (0..41).map(|i| i as f64).collect();
+    /// let narrow: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 20.0) / 0.3f64).powi(2)).collect();
+    /// let w = GridPosterior::new(theta.clone(), narrow).unwrap().warnings((0.0, 40.0));
+    /// assert!(matches!(w[..], [GridWarning::UnderResolved { .. }]));
+    /// let edge: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 40.0) / 4.0f64).powi(2)).collect();
+    /// let w = GridPosterior::new(theta.clone(), edge).unwrap().warnings((0.0, 40.0));
+    /// assert!(matches!(w[..], [GridWarning::AtPriorBound { bound: 40.0, .. }]));
+    /// let fine: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 20.0) / 3.0f64).powi(2)).collect();
+    /// assert!(GridPosterior::new(theta, fine).unwrap().warnings((0.0, 40.0)).is_empty());
+    /// ```
+    pub fn warnings(&self, prior: (f64, f64)) -> Vec<GridWarning> {
+        let nodes = if self.evaluated.len() >= 2 {
+            &self.evaluated
+        } else {
+            &self.theta
+        };
+        let mut out = vec![];
+        let peak = self.density.iter().fold(0.0f64, |m, d| m.max(*d));
+        let ends = [
+            (self.theta[0], self.density[0]),
+            (
+                self.theta[self.theta.len() - 1],
+                self.density[self.density.len() - 1],
+            ),
+        ];
+        let tol = 1e-9 * (prior.1 - prior.0).abs().max(1.0);
+        for ((t, d), bound) in ends.into_iter().zip([prior.0, prior.1]) {
+            let density_ratio = d / peak;
+            if (t - bound).abs() <= tol && density_ratio > BOUND_DENSITY_FRACTION {
+                out.push(GridWarning::AtPriorBound {
+                    bound,
+                    density_ratio,
+                });
+            }
+        }
+        let (a, b) = self.ci95;
+        let spacing = nodes
+            .windows(2)
+            .filter(|w| w[1] > a && w[0] < b)
+            .map(|w| w[1] - w[0])
+            .fold(0.0f64, f64::max);
+        if b - a < MIN_RESOLVED_SPACINGS * spacing {
+            out.push(GridWarning::UnderResolved {
+                ci_width: b - a,
+                spacing,
+            });
+        }
+        out
     }
 }
 

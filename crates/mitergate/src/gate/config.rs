@@ -403,6 +403,15 @@ impl GateConfig {
             if g.name.is_empty() {
                 return invalid(&format!("{base}.name"), "must not be empty");
             }
+            if let Some(j) = self.gauges[..i].iter().position(|o| o.name == g.name) {
+                return invalid(
+                    &format!("{base}.name"),
+                    &format!(
+                        "`{}` is also the name of gauges[{j}]: gauge names are CSV column names and must be unique",
+                        g.name
+                    ),
+                );
+            }
             let n = norm(g.direction);
             if !(n.is_finite() && n > 0.0) {
                 return invalid(&format!("{base}.direction"), "must be a non-zero vector");
