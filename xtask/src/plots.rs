@@ -5,7 +5,8 @@
 //! `gp_coefficients.svg` (Fig. 14) and `theta_posterior.svg` (Fig. 16) from
 //! `bamudi_gate::report::calibration::write_report`; here `discrepancy_{normal,tangential}.svg`
 //! (Fig. 15), `forces_{normal,tangential}.svg` (Fig. 17), `normal_force_error.svg` (Fig. 18)
-//! and `history_{normal,tangential}.svg` (Fig. 21/22). The strain errors of Fig. 19/20 are
+//! and `history_{normal,tangential}.svg` (Fig. 21/22); `fatigue_damage.svg`, the prediction
+//! level (quoin-block fatigue damage along the quoin, truth / before / after with its band). The strain errors of Fig. 19/20 are
 //! tables in `reproduce-paper.md`, not a plot.
 
 use anyhow::Result;
@@ -158,20 +159,60 @@ pub fn scenario_plots(
         }
         bamudi_gate::report::plot::line_plot(&dir.join(format!("forces_{name}.svg")), &axes, &all)?;
     }
-    normal_force_error(&dir, res, cal, model, &scenario, number)?;
-    force_history(&dir, res, cal, model, &scenario)?;
-    Ok(())
+    let plots = ScenarioPlots {
+        dir,
+        res,
+        cal,
+        model,
+        scenario,
+        number,
+    };
+    normal_force_error(&plots)?;
+    force_history(&plots)?;
+    fatigue_plot(&plots)
+}
+
+/// What the per-scenario plots below share.
+struct ScenarioPlots<'a> {
+    dir: std::path::PathBuf,
+    res: &'a ScenarioResult,
+    cal: &'a Calibration,
+    model: &'a GateMultiLevel,
+    scenario: Scenario,
+    number: u8,
+}
+
+/// The prediction level: damage per 1,000 lockages along the quoin, truth, before and after
+/// (with the band of the joint force draws).
+fn fatigue_plot(p: &ScenarioPlots<'_>) -> Result<()> {
+    use bamudi_gate::paper::fatigue;
+    let contact = p.model.unobservable.inner().contact();
+    let x = fatigue::condition(p.number);
+    let seed = 700 + p.number as u64;
+    let d = fatigue::damage_along_quoin(p.model, p.cal, &p.scenario, contact, x, seed)?;
+    let mode = bamudi_gate::coverage::mode_label(p.cal.config().coefficients);
+    line_plot(
+        &p.dir.join("fatigue_damage.svg"),
+        &format!(
+            "{}, {mode}: quoin-block fatigue damage of 1,000 lockages at h_up = {} in, h_down = {} in",
+            p.res.name, x[0], x[1]
+        ),
+        "height on the quoin d_u (in)",
+        "Miner damage per 1,000 lockages",
+        &[
+            series("truth", TRUTH, &d.z_in, &d.truth, false),
+            series("before (nominal model)", BEFORE, &d.z_in, &d.before, true),
+            series("after BA-MUDI", AFTER, &d.z_in, &d.after.mean, false),
+            series("95 % band", BAND, &d.z_in, &d.after.lower, true),
+            series("", BAND, &d.z_in, &d.after.upper, true),
+        ],
+    )
 }
 
 /// Fig. 18: normal-force RMSE over the quoin, along one water level with the other fixed.
-fn normal_force_error(
-    dir: &Path,
-    res: &ScenarioResult,
-    cal: &Calibration,
-    model: &GateMultiLevel,
-    scenario: &Scenario,
-    number: u8,
-) -> Result<()> {
+fn normal_force_error(p: &ScenarioPlots<'_>) -> Result<()> {
+    let (dir, res, cal, model) = (&p.dir, p.res, p.cal, p.model);
+    let (scenario, number) = (&p.scenario, p.number);
     let contact = model.unobservable.inner().contact();
     let nu = contact.gate().n_points();
     let (levels, xs): (Vec<f64>, Vec<[f64; 2]>) = if number == 1 {
@@ -213,13 +254,8 @@ fn normal_force_error(
 }
 
 /// Fig. 21/22: forces at location A (1/4 of the quoin height) over a week of lockages.
-fn force_history(
-    dir: &Path,
-    res: &ScenarioResult,
-    cal: &Calibration,
-    model: &GateMultiLevel,
-    scenario: &Scenario,
-) -> Result<()> {
+fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
+    let (dir, res, cal, model, scenario) = (&p.dir, p.res, p.cal, p.model, &p.scenario);
     let contact = model.unobservable.inner().contact();
     let d = &contact.gate().nu_points;
     let nu = d.len();

@@ -118,5 +118,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "load at d = 0.5 m for x = 5 kN/m: {:.3} kN/m [{:.3}, {:.3}]",
         band.mean[10], band.lower[10], band.upper[10]
     );
+
+    // the third level (Eq. 8): a prediction model fed by the calibrated load, here its peak
+    // and its resultant; the band comes from joint draws of the load, not point by point
+    let prediction = cal
+        .predictor(&model)?
+        .predict_through(&PeakAndResultant, &[5.0], 2000, 7)?;
+    println!(
+        "resultant for x = 5 kN/m: {:.4} kN [{:.4}, {:.4}]",
+        prediction.mean[1], prediction.lower[1], prediction.upper[1]
+    );
     Ok(())
+}
+
+/// A prediction model (`g_p` of Eq. 8): the peak load (kN/m) and the resultant (kN, trapezoid
+/// rule over the strip) of a load along the strip.
+struct PeakAndResultant;
+
+impl mlmodel::PredictionModel for PeakAndResultant {
+    fn output_names(&self) -> Vec<String> {
+        vec!["peak_kn_per_m".into(), "resultant_kn".into()]
+    }
+    fn evaluate(&self, _: &[f64], _: &[f64], q: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
+        out[0] = q.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        out[1] = q.windows(2).map(|w| 0.05 * 0.5 * (w[0] + w[1])).sum();
+        Ok(())
+    }
 }

@@ -86,6 +86,7 @@ pub mod fe;
 pub mod gate;
 pub mod inp;
 pub mod multilevel;
+pub mod quoin_block;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
@@ -98,3 +99,4 @@ pub use multilevel::{
     ContactForceModel, GateMultiLevel, GateSummary, MIN_HEAD_IN, MultiLevelSpec, StrainModel,
     build_contact, multilevel,
 };
+pub use quoin_block::{QuoinBlockModel, QuoinBlockParams};

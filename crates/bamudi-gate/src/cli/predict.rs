@@ -2,6 +2,8 @@
 use anyhow::{Context, Result};
 use bamudi::{Band, Calibration};
 use bamudi_gate::gate::SavedModel;
+use mitergate::quoin_block::QUOIN_BLOCK_OUTPUTS;
+use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::{ObservableModel, UnobservableModel};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -25,7 +27,15 @@ pub struct PredictArgs {
     /// calibration file).
     #[arg(long)]
     pub forces_out: Option<PathBuf>,
+    /// CSV of the quoin-block prediction level (contact stresses and fatigue damage per 1,000
+    /// lockages with 95 % bands; default: `quoin_block_<h_up>_<h_down>.csv` beside the
+    /// calibration file).
+    #[arg(long)]
+    pub quoin_block_out: Option<PathBuf>,
 }
+
+/// Joint draws of the calibrated force behind the quoin-block bands.
+const BLOCK_DRAWS: usize = 2_000;
 
 /// Runs `predict`.
 pub fn run(a: &PredictArgs) -> Result<()> {
@@ -61,6 +71,11 @@ pub fn run(a: &PredictArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", a.h_up, a.h_down)));
     bamudi_gate::output::check_file_destination("--forces-out", &out)?;
+    let block_out = a
+        .quoin_block_out
+        .clone()
+        .unwrap_or_else(|| dir.join(format!("quoin_block_{}_{}.csv", a.h_up, a.h_down)));
+    bamudi_gate::output::check_file_destination("--quoin-block-out", &block_out)?;
     let predictor = cal
         .predictor(&model)
         .with_context(|| format!("{} and {}", a.calibration.display(), model_path.display()))?;
@@ -86,7 +101,57 @@ pub fn run(a: &PredictArgs) -> Result<()> {
         z.len(),
         out.display()
     );
+    let block = QuoinBlockModel::new(QuoinBlockParams::default(), z.to_vec())?;
+    let seed = cal.config().seed;
+    let levels = predictor
+        .predict_through(&block, &x, BLOCK_DRAWS, seed)
+        .context("the quoin-block prediction level")?;
+    bamudi::data::write_atomic(&block_out, block_csv(z, &levels).as_bytes())?;
+    print_hot_spot(z, &levels);
+    println!(
+        "quoin-block stresses and fatigue (95 % bands) written to {}",
+        block_out.display()
+    );
     Ok(())
+}
+
+/// The hot spot: the quoin point of the largest mean damage rate.
+fn print_hot_spot(z: &[f64], b: &Band) {
+    let n = z.len();
+    let hot = (0..n)
+        .max_by(|p, q| b.mean[3 * n + p].total_cmp(&b.mean[3 * n + q]))
+        .unwrap_or(0);
+    println!(
+        "quoin-block hot spot at z = {:.0} in: peak contact pressure {:.0} psi [{:.0}, {:.0}], \
+         fatigue damage per 1,000 lockages {:.3e} [{:.3e}, {:.3e}] (Miner, default blocks; \
+         docs/cli.md)",
+        z[hot],
+        b.mean[hot],
+        b.lower[hot],
+        b.upper[hot],
+        b.mean[3 * n + hot],
+        b.lower[3 * n + hot],
+        b.upper[3 * n + hot]
+    );
+}
+
+/// The quoin-block outputs with their bands, one row per point along the quoin (in).
+fn block_csv(z: &[f64], b: &Band) -> String {
+    let n = z.len();
+    let mut csv = String::from("z_in");
+    for q in QUOIN_BLOCK_OUTPUTS {
+        let _ = write!(csv, ",{q}_mean,{q}_lower,{q}_upper");
+    }
+    csv.push('\n');
+    for p in 0..n {
+        let _ = write!(csv, "{}", z[p]);
+        for k in 0..QUOIN_BLOCK_OUTPUTS.len() {
+            let i = k * n + p;
+            let _ = write!(csv, ",{},{},{}", b.mean[i], b.lower[i], b.upper[i]);
+        }
+        csv.push('\n');
+    }
+    csv
 }
 
 /// The strain table: mean, model band and measurement band (adds `σ_ε`) per gauge.

@@ -35,7 +35,8 @@ use bamudi::{
     SamplingRule, SupportPolicy,
 };
 use mitergate::data::truth::{Scenario, sample_levels};
-use mitergate::{ContactModel, GateMultiLevel};
+use mitergate::{ContactModel, GateMultiLevel, QuoinBlockModel, QuoinBlockParams};
+use mlmodel::{LinearObservableModel, PredictionModel, UnobservableModel};
 use numerics::random::derive_seed;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -165,6 +166,11 @@ pub struct Replicate {
     pub band_normal: f64,
     /// The same for the tangential force.
     pub band_tangential: f64,
+    /// Fraction of condition × point pairs with fatigue damage (true or predicted) whose true
+    /// quoin-block damage rate lies in the 95 % band of the prediction level
+    /// ([`mitergate::QuoinBlockModel`] through `Predictor::predict_through`).
+    #[serde(default)]
+    pub band_fatigue: f64,
     /// Force RMSE before/after (lbf/in).
     pub force_rmse: ForceRmse,
     /// Seconds for the calibration and its scores.
@@ -216,6 +222,10 @@ pub struct ScenarioCoverage {
     pub sbc_uniformity_p: f64,
     /// Mean over replicates of the fraction of points inside the 95 % force bands.
     pub force_band_coverage_95: NormalTangential,
+    /// Mean over replicates of the fraction of live points inside the 95 % band of the
+    /// quoin-block damage rate (the prediction level).
+    #[serde(default)]
+    pub fatigue_band_coverage_95: f64,
     /// `ρ` over replicates: mean, sd, min, max.
     pub rho: [f64; 4],
     /// Median over replicates of force RMSE after / before.
@@ -370,7 +380,8 @@ impl Setup<'_> {
             };
             let m2 = cal.module2();
             fitted.get_or_insert_with(|| (m2.estimator.clone(), m2.training_pool_size));
-            let mut rep = self.score(&cal, &truth, &new_x)?;
+            let seed = derive_seed(self.opts.seed, 5000 + r as u64);
+            let mut rep = self.score(&cal, &truth, &new_x, seed)?;
             (rep.index, rep.seconds) = (r, t.elapsed().as_secs_f64());
             out.push(rep);
         }
@@ -379,20 +390,33 @@ impl Setup<'_> {
     }
 
     /// The replicate's scores against its truth.
-    fn score(&self, cal: &Calibration, truth: &Truth, new_x: &[[f64; 2]]) -> Result<Replicate> {
+    fn score(
+        &self,
+        cal: &Calibration,
+        truth: &Truth,
+        new_x: &[[f64; 2]],
+        seed: u64,
+    ) -> Result<Replicate> {
         let post = &cal.module3().posterior;
         let predictor = cal
             .predictor(&self.model)?
             .support_policy(&SupportPolicy::default().max_nodes(BAND_SUPPORT))?;
         let nu = self.contact.gate().n_points();
+        let block = QuoinBlockModel::new(
+            QuoinBlockParams::default(),
+            self.contact.gate().nu_points.clone(),
+        )?;
         let mut tally = BandTally::default();
-        for x in new_x {
+        let mut fatigue = (0usize, 0usize);
+        for (k, x) in new_x.iter().enumerate() {
             let truth_f = truth.forces(self.contact, *x)?;
             let before = prior_mean_response(&self.model, x)?;
             let band = predictor.response(x)?;
             for p in 0..2 * nu {
                 tally.add(p < nu, truth_f[p], before[p], &band, p);
             }
+            let hits = fatigue_hits(&predictor, &block, x, &truth_f, derive_seed(seed, k as u64))?;
+            fatigue = (fatigue.0 + hits.0, fatigue.1 + hits.1);
         }
         let s = post.summary(0);
         Ok(Replicate {
@@ -404,10 +428,38 @@ impl Setup<'_> {
             rho: cal.rho_star(),
             band_normal: tally.inside[0] as f64 / tally.n[0].max(1) as f64,
             band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
+            band_fatigue: fatigue.0 as f64 / fatigue.1.max(1) as f64,
             force_rmse: tally.rmse(),
             seconds: 0.0,
         })
     }
+}
+
+/// Joint force draws per condition behind the fatigue band (its 2.5 % quantile lies between
+/// the 1.5 % and 3.5 % points).
+const FATIGUE_DRAWS: usize = 1_000;
+
+/// `(inside, live)`: quoin points with a non-zero true or predicted damage rate at `x`, and
+/// those whose true rate lies in the prediction level's 95 % band.
+fn fatigue_hits<U: UnobservableModel, O: LinearObservableModel>(
+    predictor: &bamudi::Predictor<'_, U, O>,
+    block: &QuoinBlockModel,
+    x: &[f64; 2],
+    truth_forces: &[f64],
+    seed: u64,
+) -> Result<(usize, usize)> {
+    let nu = block.coordinates_in().len();
+    let mut truth = vec![0.0; 4 * nu];
+    block.evaluate(x, &[0.0], truth_forces, &mut truth)?;
+    let band = predictor.predict_through(block, x, FATIGUE_DRAWS, seed)?;
+    let (mut inside, mut live) = (0, 0);
+    for p in 3 * nu..4 * nu {
+        if truth[p] > 0.0 || band.upper[p] > 0.0 {
+            live += 1;
+            inside += usize::from(band.lower[p] <= truth[p] && truth[p] <= band.upper[p]);
+        }
+    }
+    Ok((inside, live))
 }
 
 /// Band hits and squared errors, normal `[0]` and tangential `[1]`.
@@ -483,6 +535,7 @@ fn summarise(
             normal: mean(&|r| r.band_normal),
             tangential: mean(&|r| r.band_tangential),
         },
+        fatigue_band_coverage_95: mean(&|r| r.band_fatigue),
         rho: [
             rho_mean,
             rho_sd,

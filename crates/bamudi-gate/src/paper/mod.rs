@@ -19,6 +19,7 @@
 //! optional sensitivity study re-runs Modules 2-3 with the exact linear estimator for a few
 //! other rules and reports how ρ* and the θ posterior move.
 
+pub mod fatigue;
 mod markdown;
 mod score;
 pub use score::DiscrepancyScore;
@@ -239,6 +240,10 @@ pub struct ScenarioResult {
     /// The marginal-coefficient variant (absent when not run).
     #[serde(default)]
     pub marginal: Option<ConditionalResult>,
+    /// The prediction level: quoin-block fatigue before and after calibration against the
+    /// truth, from the headline calibration (absent in reports written before it existed).
+    #[serde(default)]
+    pub fatigue: Option<fatigue::FatigueSummary>,
 }
 
 /// Module-1 facts about the gate.
@@ -475,6 +480,15 @@ pub fn run_scenario(
         ACCURACY_SAMPLES,
         opts.seed.wrapping_add(500 + number as u64),
     )?;
+    let x_fatigue = fatigue::condition(number);
+    let profile = fatigue::damage_along_quoin(
+        &s.model,
+        headline.as_ref().unwrap_or(&cal),
+        &s.scenario,
+        contact,
+        x_fatigue,
+        opts.seed.wrapping_add(700 + number as u64),
+    )?;
     let (m3, tm) = (cal.module3(), cal.timings());
     let result = ScenarioResult {
         name: format!("scenario {number}"),
@@ -497,6 +511,7 @@ pub fn run_scenario(
         sensitivity: sens,
         conditional,
         marginal,
+        fatigue: Some(fatigue::FatigueSummary::of(&profile, x_fatigue)),
     };
     Ok((result, headline.unwrap_or(cal), s.model))
 }

@@ -16,6 +16,10 @@
 //! vanishes ([`mlmodel::UnobservableModel::response_vanishes`], e.g. a gate with no head) the
 //! discrepancy, which corrects that response, is zero.
 
+mod draws;
+
+pub use draws::ResponseDraw;
+
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
 use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState};
