@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, clap::Args)]
 pub struct CalibrateArgs {
     /// TOML file: `gap_prior = [lo, hi]` (in), optional `discrepancy_terms = [6, 6]`, and a
-    /// `[calibration]` table with any `CalibrationConfig` keys (missing keys take defaults).
+    /// `[calibration]` table with any `CalibrationParams` keys (missing keys take defaults).
     #[arg(long)]
     pub config: PathBuf,
     /// CSV of experiments: `h_up`, `h_down` (in) and one column per gauge (microstrain),
