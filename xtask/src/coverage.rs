@@ -6,6 +6,7 @@ use anyhow::{Context, Result, bail};
 use bamudi::CoefficientMode;
 use bamudi::module2::estimator::LstmSettings;
 use bamudi_gate::coverage::{self, CoverageOptions, CoverageReport, LEVELS, RANK_BINS};
+use bamudi_gate::report::plot::CATEGORICAL;
 use indicatif::{ProgressBar, ProgressStyle};
 use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
@@ -198,15 +199,6 @@ fn tag(a: &CoverageArgs, o: &CoverageOptions) -> String {
     tag
 }
 
-const COLORS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(140, 86, 75),
-];
-
 fn label(s: &coverage::ScenarioCoverage) -> String {
     format!("{}, {}", s.name, coverage::mode_label(s.mode))
 }
@@ -224,7 +216,7 @@ fn coverage_plot(path: &Path, r: &CoverageReport) -> Result<()> {
         let rates: Vec<f64> = s.theta_levels.iter().map(|l| l.rate).collect();
         all.push(series(
             &label(s),
-            COLORS[i % COLORS.len()],
+            CATEGORICAL[i % CATEGORICAL.len()],
             &LEVELS,
             &rates,
             false,
@@ -251,7 +243,13 @@ fn rank_plot(path: &Path, r: &CoverageReport) -> Result<()> {
             ]);
             ys.extend([*c as f64, *c as f64]);
         }
-        all.push(series(&label(s), COLORS[i % COLORS.len()], &xs, &ys, false));
+        all.push(series(
+            &label(s),
+            CATEGORICAL[i % CATEGORICAL.len()],
+            &xs,
+            &ys,
+            false,
+        ));
     }
     if let Some(s) = r.scenarios.first() {
         let expected = s.n_replicates as f64 / RANK_BINS as f64;
