@@ -56,7 +56,9 @@ pub struct CoverageArgs {
     /// Master seed.
     #[arg(long, default_value_t = 2021)]
     seed: u64,
-    /// Also write the report as JSON here.
+    /// Also write the report as JSON here. While the study runs, each finished replicate is
+    /// appended as one JSON line to `PATH.partial.jsonl` (scenario, then one result per mode),
+    /// so a long study can be read, or its finished part kept, before it ends.
     #[arg(long)]
     json: Option<PathBuf>,
     /// Re-render the markdown and plots of a saved `--json` report (no calibration runs); the
@@ -145,7 +147,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
                 .with_context(|| format!("reading {}", path.display()))?;
             serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
         }
-        None => study(&opts)?,
+        None => study(&opts, a.json.as_deref())?,
     };
     let tag = tag(a, &report.options);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
@@ -162,7 +164,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     Ok(())
 }
 
-fn study(opts: &CoverageOptions) -> Result<CoverageReport> {
+fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> {
     bamudi_gate::progress::init_logging(false);
     let total = (opts.n_replicates * opts.scenarios.len()) as u64;
     let bar = if std::env::var_os("CI").is_none() {
@@ -173,9 +175,50 @@ fn study(opts: &CoverageOptions) -> Result<CoverageReport> {
     if let Ok(style) = ProgressStyle::with_template("replicates [{bar:40}] {pos}/{len} ({eta})") {
         bar.set_style(style);
     }
-    let report = coverage::run(opts, &|| bar.inc(1))?;
+    let log = json.map(ReplicateLog::create).transpose()?;
+    let report = coverage::run(opts, &|number, reps| {
+        bar.inc(1);
+        if let Some(log) = &log {
+            log.append(number, reps);
+        }
+    })?;
     bar.finish_and_clear();
     Ok(report)
+}
+
+/// `PATH.partial.jsonl`: one line per finished replicate, flushed as it comes.
+struct ReplicateLog {
+    path: PathBuf,
+    file: std::sync::Mutex<std::fs::File>,
+}
+
+impl ReplicateLog {
+    fn create(json: &Path) -> Result<Self> {
+        let mut name = json.as_os_str().to_owned();
+        name.push(".partial.jsonl");
+        let path = PathBuf::from(name);
+        let file = std::fs::File::create(&path)
+            .with_context(|| format!("creating the replicate log {}", path.display()))?;
+        eprintln!("finished replicates go to {}", path.display());
+        Ok(Self {
+            path,
+            file: std::sync::Mutex::new(file),
+        })
+    }
+
+    /// A failed write is reported once per replicate and does not stop the study: the log is
+    /// a convenience, the final report is written at the end either way.
+    fn append(&self, scenario: u8, reps: &[coverage::Replicate]) {
+        use std::io::Write;
+        let line = serde_json::json!({ "scenario": scenario, "modes": reps });
+        let mut file = match self.file.lock() {
+            Ok(f) => f,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        if let Err(e) = writeln!(file, "{line}").and_then(|()| file.flush()) {
+            eprintln!("warning: could not append to {}: {e}", self.path.display());
+        }
+    }
 }
 
 /// `-quick`, `-<estimator>`, `-<shape>`, `-prior-variant` as they apply.

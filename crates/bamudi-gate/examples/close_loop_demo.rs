@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (calls, cal_s) = *calibrator.calls.lock().unwrap_or_else(|e| e.into_inner());
         let r = &out.report;
         let dir = std::env::temp_dir().join(format!("bamudi_close_loop_demo_{label}"));
-        bamudi_gate::report::closeloop::write_report(&out, None, &dir)?;
+        bamudi_gate::report::closeloop::write_report(&out, None, None, &dir)?;
         eprintln!(
             "{label}: {:.0} s ({calls} calibrations, {cal_s:.0} s in them), report in {}",
             t.elapsed().as_secs_f64(),

@@ -255,6 +255,11 @@ impl CalibratedGate {
         &self.cal
     }
 
+    /// The gate's multi-level model the calibration belongs to.
+    pub fn model(&self) -> &GateMultiLevel {
+        &self.model
+    }
+
     fn predictor(
         &self,
     ) -> bamudi::Result<

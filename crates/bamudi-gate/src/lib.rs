@@ -27,6 +27,7 @@ pub mod gate;
 pub mod output;
 pub mod paper;
 pub mod progress;
+pub mod record_fatigue;
 pub mod report;
 
 pub use error::{GateAppError, Result};

@@ -6,3 +6,4 @@
 mod cli;
 mod closeloop;
 mod coverage;
+mod fatigue;

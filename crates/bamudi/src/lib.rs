@@ -47,7 +47,7 @@ pub use calibration::{Calibrate, Calibration, Timings, calibrate};
 pub use data::Experiments;
 pub use error::{BamudiError, Result};
 pub use module3::posterior::{SupportPolicy, ThetaPosterior};
-pub use module4::{Band, Predictor};
+pub use module4::{Band, DrawPaths, Predictor};
 pub use params::{
     CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode, CoefficientScales,
     EstimatorParams, MarginalPrior, Marginalisation, McmcConfig, RhoSearch, RidgeParams,

@@ -191,6 +191,14 @@ pub enum GateError {
         /// Why it is invalid.
         reason: String,
     },
+    /// A reality specification ([`Reality`](crate::reality::Reality)) is invalid.
+    #[error("invalid reality specification `{key}`: {reason}")]
+    InvalidReality {
+        /// The key (dotted path) or file at fault.
+        key: String,
+        /// Why.
+        reason: String,
+    },
     /// Assembling the `mlmodel` multi-level model (prior, discrepancy basis, dimensions)
     /// failed.
     #[error("multi-level model: {0}")]

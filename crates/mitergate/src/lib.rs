@@ -87,6 +87,7 @@ pub mod gate;
 pub mod inp;
 pub mod multilevel;
 pub mod quoin_block;
+pub mod reality;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 

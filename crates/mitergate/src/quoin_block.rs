@@ -238,6 +238,24 @@ pub const QUOIN_BLOCK_OUTPUTS: [&str; 4] = [
 /// the Hertz peak pressure, the largest sub-surface shear, the traction's surface stress (psi)
 /// and the fatigue damage of 1,000 lockages to this load (Miner, one cycle of range `τ_max`
 /// per lockage). Output blocks in the order of [`QUOIN_BLOCK_OUTPUTS`].
+///
+/// ```
+/// use mitergate::{QuoinBlockModel, QuoinBlockParams};
+/// use mlmodel::PredictionModel;
+/// // two quoin points: one unloaded, one at 40,000 lbf/in normal and 2,000 lbf/in tangential
+/// let model = QuoinBlockModel::new(QuoinBlockParams::default(), vec![10.0, 20.0]).unwrap();
+/// let forces = [0.0, 40_000.0, 0.0, 2_000.0];
+/// let mut out = [0.0; 8];
+/// model.evaluate(&[600.0, 100.0], &[90.0], &forces, &mut out).unwrap();
+/// // by hand: 1/R = 1/10 − 1/10.5 → R = 210 in; E* = E / (2 (1 − ν²)) = 15.93e6 psi;
+/// // b = √(4 · 40,000 · 210 / (π · 15.93e6)) = 0.8193 in; p₀ = 2 · 40,000 / (π b) = 31,082 psi
+/// assert_eq!(out[0], 0.0);
+/// assert!((out[1] - 31_082.0).abs() < 1.0, "peak pressure {}", out[1]);
+/// assert!((out[3] - 0.300 * out[1]).abs() < 1e-9); // τ_max = 0.300 p₀
+/// // damage of 1,000 lockages: τ_max = 9,325 psi = 64.29 MPa > the 45.7 MPa cut-off;
+/// // N = 2e6 · (100 / 64.29)^5 = 1.821e7 cycles
+/// assert!((out[7] - 1000.0 / 1.821e7).abs() < 1e-3 * out[7], "damage {}", out[7]);
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct QuoinBlockModel {
     params: QuoinBlockParams,

@@ -6,6 +6,7 @@
 //! | [`standardize`] | per-column affine standardisation `z = (v − mean) / sd` | `seqnet` (LSTM inputs and outputs), `bamudi` (ridge estimator, close-loop features) |
 //! | [`random`] | seeded standard-normal draws (Box-Muller) and per-index seed derivation | `mlmodel` (prior draws), `bamudi` (training sets, MCMC) |
 //! | [`robust`] | median and the first-difference noise scale | `bamudi` (gauge-noise estimate, close-loop checks) |
+//! | [`rainflow`] | online rainflow cycle counting (ASTM E1049) | `bamudi-gate` (quoin-block fatigue over a record) |
 //!
 //! Distributions (normal, chi-square, Student t, binomial) come from `statrs`, not from here.
 //!
@@ -22,6 +23,7 @@ pub struct ReadmeDoctest;
 pub mod cholesky;
 pub mod eigen;
 mod error;
+pub mod rainflow;
 pub mod random;
 pub mod robust;
 pub mod standardize;

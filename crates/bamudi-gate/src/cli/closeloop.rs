@@ -3,13 +3,20 @@
 use super::{GateArgs, build_contact, gate_config};
 use anyhow::{Context, Result};
 use bamudi::CalibrationConfig;
-use bamudi::closeloop::{CloseLoopConfig, CloseLoopReport, MissingPolicy, close_loop};
+use bamudi::closeloop::{
+    CloseLoopConfig, CloseLoopOutcome, CloseLoopReport, MeasuredRecord, MissingPolicy, close_loop,
+};
 use bamudi::observe::Observer;
-use bamudi_gate::calibrator::GateCalibrator;
+use bamudi_gate::calibrator::{CalibratedGate, GateCalibrator};
 use bamudi_gate::gate;
 use bamudi_gate::output::StagedDir;
 use bamudi_gate::progress::Bars;
+use bamudi_gate::record_fatigue::{
+    self, LoadHistory, RecordFatigue, RecordFatigueOptions, record_fatigue,
+};
 use bamudi_gate::report::calibration::ReportInputs;
+use mitergate::{QuoinBlockModel, QuoinBlockParams};
+use mlmodel::UnobservableModel;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -114,7 +121,13 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
         theta_true: None,
         warnings: vec![],
     };
-    let files = bamudi_gate::report::closeloop::write_report(&out, Some(&inputs), staged.path())?;
+    let fatigue = loop_fatigue(&out, &rec, calibrator.calibration_config().seed)?;
+    let files = bamudi_gate::report::closeloop::write_report(
+        &out,
+        Some(&inputs),
+        Some(&fatigue),
+        staged.path(),
+    )?;
     let dir = staged.commit()?;
     for f in files {
         if let Some(name) = f.file_name() {
@@ -122,8 +135,32 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
         }
     }
     print_summary(&out.report);
+    println!("{}", record_fatigue::summary(&fatigue));
     println!("report in {}", dir.display());
     Ok(())
+}
+
+/// The quoin block's fatigue over the whole record with the loop's final calibration.
+fn loop_fatigue(out: &CloseLoopOutcome, rec: &MeasuredRecord, seed: u64) -> Result<RecordFatigue> {
+    let any: &dyn std::any::Any = out.model.as_ref();
+    let gate = any
+        .downcast_ref::<CalibratedGate>()
+        .context("the close loop's final model is not a gate calibration")?;
+    let model = gate.model();
+    let block = QuoinBlockModel::new(
+        QuoinBlockParams::default(),
+        model.unobservable.coordinates().to_vec(),
+    )?;
+    let x = (0..rec.len())
+        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
+        .collect();
+    let history = LoadHistory::new(x, rec.time_h.clone())?;
+    let opts = RecordFatigueOptions {
+        seed,
+        ..RecordFatigueOptions::default()
+    };
+    record_fatigue(model, gate.calibration(), &block, &history, None, opts)
+        .context("the quoin block's fatigue over the record")
 }
 
 /// The loop's settings: the configuration file (or the defaults), the hold-out override and

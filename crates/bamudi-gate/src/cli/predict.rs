@@ -2,8 +2,9 @@
 use anyhow::{Context, Result};
 use bamudi::{Band, Calibration};
 use bamudi_gate::gate::SavedModel;
+use bamudi_gate::record_fatigue::{self, LoadHistory, RecordFatigueOptions, record_fatigue};
 use mitergate::quoin_block::QUOIN_BLOCK_OUTPUTS;
-use mitergate::{QuoinBlockModel, QuoinBlockParams};
+use mitergate::{GateMultiLevel, QuoinBlockModel, QuoinBlockParams};
 use mlmodel::{ObservableModel, UnobservableModel};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -17,12 +18,33 @@ pub struct PredictArgs {
     /// `model.json` written by `calibrate` (default: beside the calibration file).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Upstream water level above the sill (in).
-    #[arg(long, allow_negative_numbers = true)]
-    pub h_up: f64,
+    /// Upstream water level above the sill (in); with `--h-down`, the condition to predict at
+    /// (needed unless `--record` is given).
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        required_unless_present = "record",
+        requires = "h_down"
+    )]
+    pub h_up: Option<f64>,
     /// Downstream water level above the sill (in).
-    #[arg(long, allow_negative_numbers = true)]
-    pub h_down: f64,
+    #[arg(
+        long,
+        allow_negative_numbers = true,
+        required_unless_present = "record",
+        requires = "h_up"
+    )]
+    pub h_down: Option<f64>,
+    /// A load history (a field record or a lockage schedule: CSV with `time`, `h_up`, `h_down`;
+    /// other columns are ignored): the quoin block's fatigue over it — rainflow-counted stress
+    /// cycles, damage per 1,000 lockages and years to crack initiation along the quoin, nominal
+    /// model beside the calibrated one with 95 % bands.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// CSV of the fatigue over `--record` (default: `record_fatigue.csv` beside the
+    /// calibration file).
+    #[arg(long, requires = "record")]
+    pub record_out: Option<PathBuf>,
     /// CSV of the predicted quoin forces (default: `forces_<h_up>_<h_down>.csv` beside the
     /// calibration file).
     #[arg(long)]
@@ -39,12 +61,6 @@ const BLOCK_DRAWS: usize = 2_000;
 
 /// Runs `predict`.
 pub fn run(a: &PredictArgs) -> Result<()> {
-    for (name, v) in [("--h-up", a.h_up), ("--h-down", a.h_down)] {
-        anyhow::ensure!(
-            v.is_finite(),
-            "{name} must be a finite level in inches, got {v}"
-        );
-    }
     let cal = Calibration::load(&a.calibration)?;
     let dir = a
         .calibration
@@ -61,58 +77,137 @@ pub fn run(a: &PredictArgs) -> Result<()> {
     let model = saved
         .multilevel(0)
         .with_context(|| format!("the model in {}", model_path.display()))?;
-    let x = [a.h_up, a.h_down];
+    if let (Some(h_up), Some(h_down)) = (a.h_up, a.h_down) {
+        let x = [h_up, h_down];
+        let files = ConditionFiles::of(a, &dir, x)?;
+        let what = format!("{} and {}", a.calibration.display(), model_path.display());
+        at_condition(&cal, &model, &what, x, &files)?;
+    }
+    if let Some(record) = &a.record {
+        let out = a
+            .record_out
+            .clone()
+            .unwrap_or_else(|| dir.join("record_fatigue.csv"));
+        over_record(&cal, &model, record, &out)?;
+    }
+    Ok(())
+}
+
+/// The output files of the prediction at one condition, checked before any work.
+struct ConditionFiles {
+    forces: PathBuf,
+    block: PathBuf,
+}
+
+impl ConditionFiles {
+    fn of(a: &PredictArgs, dir: &std::path::Path, x: [f64; 2]) -> Result<Self> {
+        for (name, v) in [("--h-up", x[0]), ("--h-down", x[1])] {
+            anyhow::ensure!(
+                v.is_finite(),
+                "{name} must be a finite level in inches, got {v}"
+            );
+        }
+        let forces = a
+            .forces_out
+            .clone()
+            .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", x[0], x[1])));
+        bamudi_gate::output::check_file_destination("--forces-out", &forces)?;
+        let block = a
+            .quoin_block_out
+            .clone()
+            .unwrap_or_else(|| dir.join(format!("quoin_block_{}_{}.csv", x[0], x[1])));
+        bamudi_gate::output::check_file_destination("--quoin-block-out", &block)?;
+        Ok(Self { forces, block })
+    }
+}
+
+/// Module 4 at one condition: strains, forces and the quoin-block prediction level.
+fn at_condition(
+    cal: &Calibration,
+    model: &GateMultiLevel,
+    what: &str,
+    x: [f64; 2],
+    files: &ConditionFiles,
+) -> Result<()> {
     model
         .unobservable
         .check_input(&x)
         .context("--h-up / --h-down")?;
-    let out = a
-        .forces_out
-        .clone()
-        .unwrap_or_else(|| dir.join(format!("forces_{}_{}.csv", a.h_up, a.h_down)));
-    bamudi_gate::output::check_file_destination("--forces-out", &out)?;
-    let block_out = a
-        .quoin_block_out
-        .clone()
-        .unwrap_or_else(|| dir.join(format!("quoin_block_{}_{}.csv", a.h_up, a.h_down)));
-    bamudi_gate::output::check_file_destination("--quoin-block-out", &block_out)?;
-    let predictor = cal
-        .predictor(&model)
-        .with_context(|| format!("{} and {}", a.calibration.display(), model_path.display()))?;
+    let predictor = cal.predictor(model).context(what.to_string())?;
     let strains = predictor.outputs(&x).with_context(|| {
         format!(
             "predicting strains at h_up = {} in, h_down = {} in",
-            a.h_up, a.h_down
+            x[0], x[1]
         )
     })?;
     let forces = predictor
         .response(&x)
         .context("predicting the quoin forces")?;
     print_strains(
-        a,
+        x,
         &model.observable.output_names(),
         &strains,
         cal.sigma_eps(),
     );
     let z = model.unobservable.coordinates();
-    bamudi::data::write_atomic(&out, forces_csv(z, &forces).as_bytes())?;
+    bamudi::data::write_atomic(&files.forces, forces_csv(z, &forces).as_bytes())?;
     println!(
         "quoin forces (95 % bands, {} points along the quoin) written to {}",
         z.len(),
-        out.display()
+        files.forces.display()
     );
     let block = QuoinBlockModel::new(QuoinBlockParams::default(), z.to_vec())?;
-    let seed = cal.config().seed;
     let levels = predictor
-        .predict_through(&block, &x, BLOCK_DRAWS, seed)
+        .predict_through(&block, &x, BLOCK_DRAWS, cal.config().seed)
         .context("the quoin-block prediction level")?;
-    bamudi::data::write_atomic(&block_out, block_csv(z, &levels).as_bytes())?;
+    bamudi::data::write_atomic(&files.block, block_csv(z, &levels).as_bytes())?;
     print_hot_spot(z, &levels);
     println!(
         "quoin-block stresses and fatigue (95 % bands) written to {}",
-        block_out.display()
+        files.block.display()
     );
     Ok(())
+}
+
+/// The quoin block's fatigue over a load history.
+fn over_record(
+    cal: &Calibration,
+    model: &GateMultiLevel,
+    record: &std::path::Path,
+    out: &std::path::Path,
+) -> Result<()> {
+    bamudi_gate::output::check_file_destination("--record-out", out)?;
+    let history = load_history(record, model)?;
+    let block = QuoinBlockModel::new(
+        QuoinBlockParams::default(),
+        model.unobservable.coordinates().to_vec(),
+    )?;
+    let opts = RecordFatigueOptions {
+        seed: cal.config().seed,
+        ..RecordFatigueOptions::default()
+    };
+    let r = record_fatigue(model, cal, &block, &history, None, opts)
+        .with_context(|| format!("the quoin block's fatigue over {}", record.display()))?;
+    bamudi::data::write_atomic(out, record_fatigue::to_csv(&r).as_bytes())?;
+    println!("{}", record_fatigue::summary(&r));
+    println!(
+        "fatigue along the quoin over the record written to {}",
+        out.display()
+    );
+    Ok(())
+}
+
+/// The record's levels and times (no gauge column needed; each row checked against the
+/// gate's input domain, naming the file and line).
+fn load_history(record: &std::path::Path, model: &GateMultiLevel) -> Result<LoadHistory> {
+    let ingest = bamudi::closeloop::IngestConfig::new(&["h_up", "h_down"], &[]);
+    let rec = bamudi_gate::gate::read_record(record, model, &ingest)
+        .with_context(|| format!("--record {}", record.display()))?;
+    let x = (0..rec.len())
+        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
+        .collect();
+    LoadHistory::new(x, rec.time_h.clone())
+        .with_context(|| format!("--record {}", record.display()))
 }
 
 /// The hot spot: the quoin point of the largest mean damage rate.
@@ -155,11 +250,11 @@ fn block_csv(z: &[f64], b: &Band) -> String {
 }
 
 /// The strain table: mean, model band and measurement band (adds `σ_ε`) per gauge.
-fn print_strains(a: &PredictArgs, names: &[String], strains: &Band, sigma_eps: f64) {
+fn print_strains(x: [f64; 2], names: &[String], strains: &Band, sigma_eps: f64) {
     println!(
         "strains at h_up = {} in, h_down = {} in (microstrain; model band = noise-free strain, \
          measurement band adds sigma_eps = {sigma_eps:.3}):",
-        a.h_up, a.h_down
+        x[0], x[1]
     );
     println!(
         "{:>8} {:>12} {:>12} {:>12} {:>14} {:>14}",

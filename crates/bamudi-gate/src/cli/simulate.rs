@@ -5,6 +5,7 @@ use bamudi::Experiments;
 use bamudi_gate::output::check_file_destination;
 use mitergate::data::field::{FieldConfig, FieldEffects, MissingValues};
 use mitergate::data::truth::{self, Scenario};
+use mitergate::reality::Reality;
 use nalgebra::DMatrix;
 use std::path::PathBuf;
 
@@ -33,6 +34,10 @@ pub struct ExperimentsArgs {
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true,
           value_parser = number_in(0.0, 1000.0, Bound::Closed, "microstrain"))]
     pub noise_sd: f64,
+    /// A reality (TOML, docs/reality.md): the truth departs from the gate by declared
+    /// deviations (as built, mesh, support, sensors).
+    #[arg(long)]
+    pub reality: Option<PathBuf>,
     /// Output CSV (`h_up`, `h_down` in inches, one column per gauge in microstrain).
     #[arg(long)]
     pub out: PathBuf,
@@ -69,9 +74,34 @@ pub struct FieldArgs {
     #[arg(long, allow_negative_numbers = true,
           value_parser = number_in(0.0, 0.9, Bound::Closed, "(a probability)"))]
     pub missing: Option<f64>,
+    /// A reality (TOML, docs/reality.md): the truth departs from the gate by declared
+    /// deviations (as built, mesh, support, sensors).
+    #[arg(long)]
+    pub reality: Option<PathBuf>,
     /// Output CSV (see docs/closeloop.md for the columns).
     #[arg(long)]
     pub out: PathBuf,
+}
+
+/// The truth's contact model: the gate of `gate`, or its reality (as built, mesh, support)
+/// when `--reality` is given; and the reality (the identity without one).
+fn truth_contact(
+    gate: &GateArgs,
+    reality: Option<&std::path::Path>,
+) -> Result<(mitergate::ContactModel, Reality)> {
+    let drawing = gate_config(gate)?;
+    let Some(path) = reality else {
+        return Ok((build_contact(&drawing)?, Reality::default()));
+    };
+    let r = Reality::from_file(path).with_context(|| format!("--reality {}", path.display()))?;
+    r.check(&drawing)
+        .with_context(|| format!("--reality {}", path.display()))?;
+    let truth = build_contact(&r.truth_gate(&drawing)?)?;
+    let params = r.contact_params(truth.params().clone());
+    let contact = mitergate::ContactModel::new(truth.gate().clone(), params)
+        .with_context(|| format!("--reality {}: the support", path.display()))?;
+    eprintln!("truth: the reality of {}", path.display());
+    Ok((contact, r))
 }
 
 /// Most rows of a simulated field record (a year at 3-minute steps): every row is a contact
@@ -96,11 +126,19 @@ fn experiments(a: &ExperimentsArgs, gate: &GateArgs, seed: Option<u64>) -> Resul
     }
     sc.validate().context("invalid --n or --noise-sd")?;
     check_file_destination("--out", &a.out)?;
-    let contact = build_contact(&gate_config(gate)?)?;
+    let (contact, reality) = truth_contact(gate, a.reality.as_deref())?;
     let e = truth::generate(&sc, &contact).context("generating the experiments")?;
     let names = contact.gate().gauge_names.clone();
-    let x = DMatrix::from_fn(e.x.len(), 2, |i, j| e.x[i][j]);
-    let y = DMatrix::from_fn(e.x.len(), names.len(), |i, j| e.strains[i][j]);
+    let n = e.x.len();
+    let mut y = DMatrix::from_fn(n, names.len(), |i, j| e.strains[i][j]);
+    for i in 0..n {
+        let mut row: Vec<Option<f64>> = y.row(i).iter().map(|v| Some(*v)).collect();
+        reality.apply_sensors(&names, i as f64 / (n - 1).max(1) as f64, &mut row);
+        for (j, v) in row.into_iter().enumerate() {
+            y[(i, j)] = v.unwrap_or(f64::NAN);
+        }
+    }
+    let x = DMatrix::from_fn(n, 2, |i, j| e.x[i][j]);
     let exps = Experiments::new(vec!["h_up".into(), "h_down".into()], names, x, y)?;
     exps.write_csv(&a.out)?;
     eprintln!(
@@ -141,9 +179,13 @@ fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
         a.step_minutes
     );
     check_file_destination("--out", &a.out)?;
-    let gate_cfg = gate_config(gate)?;
-    let contact = build_contact(&gate_cfg)?;
-    let rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;
+    let (contact, reality) = truth_contact(gate, a.reality.as_deref())?;
+    let mut rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;
+    let (t0, t1) = (rec.time_unix_s[0], rec.time_unix_s[rec.len() - 1]);
+    for (row, t) in rec.strains.iter_mut().zip(&rec.time_unix_s) {
+        let position = (t - t0) as f64 / (t1 - t0).max(1) as f64;
+        reality.apply_sensors(&rec.gauge_names, position, row);
+    }
     rec.write_csv(&a.out)
         .with_context(|| format!("writing {}", a.out.display()))?;
     eprintln!(

@@ -47,12 +47,13 @@ fn coverage_row(s: &ScenarioCoverage) -> String {
 
 fn prediction_row(s: &ScenarioCoverage) -> String {
     format!(
-        "| {} | {} | {:.3} | {:.3} | {:.3} | {:.3} ± {:.3} [{:.3}, {:.3}] | {:.3} | {:.3} | {:.1} |\n",
+        "| {} | {} | {:.3} | {:.3} | {} | {:.3} ± {:.3} [{:.3}, {:.3}] | {:.3} | {:.3} | {:.1} |\n",
         s.name,
         mode_label(s.mode),
         s.force_band_coverage_95.normal,
         s.force_band_coverage_95.tangential,
-        s.fatigue_band_coverage_95,
+        s.fatigue_band_coverage_95
+            .map_or("not measured".to_string(), |v| format!("{v:.3}")),
         s.rho[0],
         s.rho[1],
         s.rho[2],

@@ -168,9 +168,10 @@ pub struct Replicate {
     pub band_tangential: f64,
     /// Fraction of condition × point pairs with fatigue damage (true or predicted) whose true
     /// quoin-block damage rate lies in the 95 % band of the prediction level
-    /// ([`mitergate::QuoinBlockModel`] through `Predictor::predict_through`).
+    /// ([`mitergate::QuoinBlockModel`] through `Predictor::predict_through`); `None` in
+    /// reports saved before the prediction level existed.
     #[serde(default)]
-    pub band_fatigue: f64,
+    pub band_fatigue: Option<f64>,
     /// Force RMSE before/after (lbf/in).
     pub force_rmse: ForceRmse,
     /// Seconds for the calibration and its scores.
@@ -223,9 +224,10 @@ pub struct ScenarioCoverage {
     /// Mean over replicates of the fraction of points inside the 95 % force bands.
     pub force_band_coverage_95: NormalTangential,
     /// Mean over replicates of the fraction of live points inside the 95 % band of the
-    /// quoin-block damage rate (the prediction level).
+    /// quoin-block damage rate (the prediction level); `None` when a replicate did not
+    /// measure it (a report saved before the prediction level existed).
     #[serde(default)]
-    pub fatigue_band_coverage_95: f64,
+    pub fatigue_band_coverage_95: Option<f64>,
     /// `ρ` over replicates: mean, sd, min, max.
     pub rho: [f64; 4],
     /// Median over replicates of force RMSE after / before.
@@ -255,9 +257,13 @@ pub struct CoverageReport {
     pub total_s: f64,
 }
 
-/// Runs the study; `on_replicate` is called after each replicate (e.g. a progress bar), from
-/// worker threads.
-pub fn run(opts: &CoverageOptions, on_replicate: &(dyn Fn() + Sync)) -> Result<CoverageReport> {
+/// Called after each replicate, from worker threads, with the scenario number and the
+/// replicate's result per mode (in `opts.modes` order): a progress bar, or a log of finished
+/// replicates that a long study can be read from while it runs.
+pub type OnReplicate<'a> = &'a (dyn Fn(u8, &[Replicate]) + Sync);
+
+/// Runs the study; `on_replicate` sees every finished replicate.
+pub fn run(opts: &CoverageOptions, on_replicate: OnReplicate) -> Result<CoverageReport> {
     opts.check()?;
     let t = Instant::now();
     let (contact, gate) = build_gate(opts.mesh_element_size)?;
@@ -295,7 +301,7 @@ fn scenario_replicates(
     contact: &ContactModel,
     number: u8,
     opts: &CoverageOptions,
-    on_replicate: &(dyn Fn() + Sync),
+    on_replicate: OnReplicate,
 ) -> Result<Vec<Vec<Replicate>>> {
     let prior = Scenario::paper(number)?.prior;
     let setup = Setup {
@@ -306,14 +312,14 @@ fn scenario_replicates(
     };
     // the first replicate fits the estimator the others reuse
     let (first, estimator) = setup.replicate(0, None)?;
-    on_replicate();
+    on_replicate(number, &first);
     let mut all = vec![first];
     let rest = (1..opts.n_replicates)
         .into_par_iter()
         .map(|r| {
-            let out = setup.replicate(r, Some(&estimator)).map(|(reps, _)| reps);
-            on_replicate();
-            out
+            let reps = setup.replicate(r, Some(&estimator))?.0;
+            on_replicate(number, &reps);
+            Ok(reps)
         })
         .collect::<Result<Vec<_>>>()?;
     all.extend(rest);
@@ -428,7 +434,7 @@ impl Setup<'_> {
             rho: cal.rho_star(),
             band_normal: tally.inside[0] as f64 / tally.n[0].max(1) as f64,
             band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
-            band_fatigue: fatigue.0 as f64 / fatigue.1.max(1) as f64,
+            band_fatigue: Some(fatigue.0 as f64 / fatigue.1.max(1) as f64),
             force_rmse: tally.rmse(),
             seconds: 0.0,
         })
@@ -535,7 +541,11 @@ fn summarise(
             normal: mean(&|r| r.band_normal),
             tangential: mean(&|r| r.band_tangential),
         },
-        fatigue_band_coverage_95: mean(&|r| r.band_fatigue),
+        fatigue_band_coverage_95: reps
+            .iter()
+            .map(|r| r.band_fatigue)
+            .sum::<Option<f64>>()
+            .map(|total| total / n as f64),
         rho: [
             rho_mean,
             rho_sd,

@@ -21,7 +21,7 @@
 
 pub mod fatigue;
 mod markdown;
-mod score;
+pub(crate) mod score;
 pub use score::DiscrepancyScore;
 pub(crate) use score::prior_mean_response;
 mod sensitivity;

@@ -1,8 +1,9 @@
 //! The close loop's report on a gate record: `report.md`, `results.json` and SVG plots.
 
 use super::calibration::{ReportInputs, inputs_markdown};
-use super::plot::{AFTER, BEFORE, Series, draw_legend, svg_figure, tick};
+use super::plot::{AFTER, Axes, BAND, BEFORE, Series, draw_legend, line_plot, svg_figure, tick};
 use crate::error::{GateAppError, Result};
+use crate::record_fatigue::RecordFatigue;
 use bamudi::closeloop::{CloseLoopOutcome, CloseLoopReport};
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -136,12 +137,14 @@ fn checks_section(s: &mut String, r: &CloseLoopReport) {
 }
 
 /// Writes `report.md`, `results.json`, `rmse.svg`, `theta.svg` and one
-/// `residual_vs_<covariate>.svg` per accepted effect into `dir` (created if needed); returns the
-/// written paths.
+/// `residual_vs_<covariate>.svg` per accepted effect into `dir` (created if needed); with
+/// `fatigue`, a section on the quoin block's fatigue over the record, its `results.json` key
+/// `record_fatigue` and `fatigue_along_quoin.svg`. Returns the written paths.
 ///
 pub fn write_report(
     out: &CloseLoopOutcome,
     inputs: Option<&ReportInputs>,
+    fatigue: Option<&RecordFatigue>,
     dir: &Path,
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| GateAppError::Io {
@@ -156,15 +159,19 @@ pub fn write_report(
         let at = text.find('\n').map_or(text.len(), |k| k + 1);
         text.insert_str(at, &format!("\n{}", inputs_markdown(i)));
     }
+    if let Some(f) = fatigue {
+        text.push_str(&fatigue_markdown(f));
+    }
     bamudi::data::write_atomic(&md, text.as_bytes())?;
     files.push(md);
     let js = dir.join("results.json");
-    let text = serde_json::to_string_pretty(&out.report).map_err(|e| GateAppError::Serde {
-        context: js.display().to_string(),
-        reason: e.to_string(),
-    })?;
-    bamudi::data::write_atomic(&js, text.as_bytes())?;
+    bamudi::data::write_atomic(&js, results_json(&out.report, fatigue, &js)?.as_bytes())?;
     files.push(js);
+    if let Some(f) = fatigue {
+        let p = dir.join("fatigue_along_quoin.svg");
+        plot_fatigue(f, &p)?;
+        files.push(p);
+    }
     let p = dir.join("rmse.svg");
     plot_rmse(&out.report, &p)?;
     files.push(p);
@@ -182,6 +189,74 @@ pub fn write_report(
         files.push(p);
     }
     Ok(files)
+}
+
+/// The report as JSON, with the fatigue under `record_fatigue` when there is one.
+fn results_json(r: &CloseLoopReport, fatigue: Option<&RecordFatigue>, js: &Path) -> Result<String> {
+    let serde = |e: serde_json::Error| GateAppError::Serde {
+        context: js.display().to_string(),
+        reason: e.to_string(),
+    };
+    let mut value = serde_json::to_value(r).map_err(serde)?;
+    if let (Some(f), Some(map)) = (fatigue, value.as_object_mut()) {
+        map.insert(
+            "record_fatigue".into(),
+            serde_json::to_value(f).map_err(serde)?,
+        );
+    }
+    serde_json::to_string_pretty(&value).map_err(serde)
+}
+
+/// The fatigue section of `report.md`.
+fn fatigue_markdown(f: &RecordFatigue) -> String {
+    let years = |v: Option<f64>| v.map_or("no initiation".to_string(), |y| format!("{y:.3e}"));
+    let h = &f.hot_spot;
+    format!(
+        "\n## Quoin-block fatigue over the record\n\n\
+         The loop's final calibration pushed through the quoin-block model along the whole \
+         record (rainflow-counted cycles of the largest sub-surface shear, Miner's rule on the \
+         EN 1993-1-9 shear curve, default blocks; `bamudi_gate::record_fatigue`): {:.1} days \
+         sampled every {:.0} min, {:.1} lockages (fill-and-empty cycles) counted, {} joint draws. \
+         The nominal model is the force averaged over the gap's prior, rho = 1, no \
+         discrepancy.\n\n\
+         | at the hot spot z = {:.1} in | nominal model | calibrated (95 % band) |\n|---|---|---|\n\
+         | damage per 1,000 lockages | {:.3e} | {:.3e} [{:.3e}, {:.3e}] |\n\
+         | years to crack initiation at this record's rate | {} | {} [{}, {}] |\n\n\
+         Per point: `fatigue_along_quoin.svg`, `results.json` key `record_fatigue`.\n",
+        f.duration_days,
+        60.0 * f.sampling_step_h,
+        f.lockages,
+        f.n_draws,
+        h.z_in,
+        h.before,
+        h.after_mean,
+        h.after_lower,
+        h.after_upper,
+        years(h.years_before),
+        years(h.years_after),
+        years(h.years_after_lower),
+        years(h.years_after_upper),
+    )
+}
+
+/// Damage per 1,000 lockages along the quoin: nominal, calibrated mean and band.
+fn plot_fatigue(f: &RecordFatigue, path: &Path) -> Result<()> {
+    let z = &f.z_in;
+    let series = [
+        Series::xy("nominal model", BEFORE, z, &f.before),
+        Series::xy("calibrated mean", AFTER, z, &f.after.mean),
+        Series::xy("95 % band", BAND, z, &f.after.lower).dashed(),
+        Series::xy("", BAND, z, &f.after.upper).dashed(),
+    ];
+    let axes = Axes::new(
+        &format!(
+            "quoin-block fatigue over the record ({:.1} days, {:.0} lockages)",
+            f.duration_days, f.lockages
+        ),
+        "height above the sill (in)",
+        "damage per 1,000 lockages",
+    );
+    line_plot(path, &axes, &series)
 }
 
 /// Held-out RMSE per gauge, before and after the loop: one group of two bars per gauge,

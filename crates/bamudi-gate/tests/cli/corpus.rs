@@ -2236,6 +2236,55 @@ fn predict_inputs(base: &Base, fx: &Fixture) -> Vec<Case> {
             &["f.txt/forces.csv"],
         )
         .file("f.txt", "a file, not a directory\n"),
+        // the load history of --record (fatigue over a record)
+        pc(
+            "record_missing",
+            good_cal,
+            good_model,
+            call(&["--record", "none.csv"]),
+            &["none.csv"],
+        ),
+        pc(
+            "record_without_h_down",
+            good_cal,
+            good_model,
+            call(&["--record", "r.csv"]),
+            &["r.csv", "h_down"],
+        )
+        .file("r.csv", "time,h_up\n0,600\n1,120\n"),
+        pc(
+            "record_time_backwards",
+            good_cal,
+            good_model,
+            call(&["--record", "r.csv"]),
+            &["r.csv", "line 3", "time"],
+        )
+        .file("r.csv", "time,h_up,h_down\n1,600,100\n0,120,120\n"),
+        pc(
+            "record_level_outside_domain",
+            good_cal,
+            good_model,
+            call(&["--record", "r.csv"]),
+            &["r.csv", "line 3"],
+        )
+        .file("r.csv", "time,h_up,h_down\n0,600,100\n1,900,100\n"),
+        pc(
+            "record_single_row",
+            good_cal,
+            good_model,
+            call(&["--record", "r.csv"]),
+            &["r.csv", "two samples"],
+        )
+        .file("r.csv", "time,h_up,h_down\n0,600,100\n"),
+        pc(
+            "record_out_below_a_file",
+            good_cal,
+            good_model,
+            call(&["--record", "r.csv", "--record-out", "f.txt/fatigue.csv"]),
+            &["f.txt/fatigue.csv"],
+        )
+        .file("r.csv", "time,h_up,h_down\n0,600,100\n1,120,120\n")
+        .file("f.txt", "a file, not a directory\n"),
     ]
 }
 

@@ -314,6 +314,60 @@ fn simulate_calibrate_predict_round_trip_on_a_coarse_gate() {
     ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("h_up"), "{}", stderr(&o));
+
+    // fatigue over a load history: a simulated field record, of which only the levels and
+    // times are read; one row per quoin point, as in the forces CSV
+    let field = d.join("field.csv");
+    let o = bamudi(&[
+        "--seed",
+        "4",
+        "simulate",
+        "field",
+        "--days",
+        "3",
+        "--gate",
+        &gate,
+        "--out",
+        s(&field),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let fatigue = d.join("fatigue.csv");
+    let predict_record = |record: &Path| {
+        bamudi(&[
+            "predict",
+            "--calibration",
+            s(&out.join("calibration.json")),
+            "--record",
+            s(record),
+            "--record-out",
+            s(&fatigue),
+        ])
+    };
+    let o = predict_record(&field);
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout.contains("lockages counted"), "{stdout}");
+    let table = std::fs::read_to_string(&fatigue).unwrap();
+    assert!(table.starts_with("z_in,damage_per_1000_before"), "{table}");
+    assert_eq!(table.lines().count(), csv.lines().count(), "{table}");
+    // a history whose time runs backwards is an error naming the file and the row
+    let text = std::fs::read_to_string(&field).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    lines.swap(5, 6);
+    let shuffled = d.join("shuffled.csv");
+    std::fs::write(&shuffled, lines.join("\n")).unwrap();
+    std::fs::remove_file(&fatigue).unwrap();
+    let o = predict_record(&shuffled);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("shuffled.csv") && stderr(&o).contains("time"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        !fatigue.exists(),
+        "a failed run must not leave a fatigue table"
+    );
 }
 
 #[test]
@@ -351,6 +405,21 @@ fn close_loop_command_reads_a_record_and_writes_its_report() {
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(out.join("results.json").exists() && out.join("report.md").exists());
+    // the prediction level over the record: report section, JSON key and plot
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        report.contains("## Quoin-block fatigue over the record"),
+        "{report}"
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let fatigue = &json["record_fatigue"];
+    assert!(fatigue["lockages"].as_f64().unwrap() > 10.0, "{fatigue}");
+    assert_eq!(
+        fatigue["z_in"].as_array().unwrap().len(),
+        fatigue["before"].as_array().unwrap().len()
+    );
+    assert!(out.join("fatigue_along_quoin.svg").exists());
     let bad = d.join("bad.toml");
     std::fs::write(&bad, "calibration_fraction = 1.5\n").unwrap();
     fails_naming(
@@ -388,5 +457,81 @@ fn close_loop_command_reads_a_record_and_writes_its_report() {
             "60",
         ],
         &["--gap-prior", "two numbers"],
+    );
+}
+
+/// `simulate --reality`: a sensor error moves its gauge's column by exactly its formula and no
+/// other; an as-built gate moves every gauge but not the levels (same seed); a bad
+/// specification is an error naming the file and the key.
+#[test]
+fn simulate_with_a_reality_departs_from_the_gate_as_declared() {
+    let d = dir("reality");
+    let gate = coarse_gate(&d);
+    let run = |name: &str, reality: Option<&str>| -> Vec<Vec<f64>> {
+        let out = d.join(format!("{name}.csv"));
+        let mut args = vec!["--seed", "5", "simulate", "experiments", "--scenario", "1"];
+        args.extend(["--n", "30", "--gate", &gate, "--out", s(&out)]);
+        let spec = d.join(format!("{name}.toml"));
+        if let Some(text) = reality {
+            std::fs::write(&spec, text).unwrap();
+            args.extend(["--reality", s(&spec)]);
+        }
+        let o = bamudi(&args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = std::fs::read_to_string(&out).unwrap();
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+            .collect()
+    };
+    let base = run("base", None);
+    // SG2 is column 3 (after h_up, h_down)
+    let sensor = run(
+        "sensor",
+        Some("[[sensors]]\ngauge = \"SG2\"\nscale = 1.5\noffset_microstrain = 5.0\n"),
+    );
+    for (b, r) in base.iter().zip(&sensor) {
+        for c in 0..b.len() {
+            let want = if c == 3 { 1.5 * b[c] + 5.0 } else { b[c] };
+            // the CSV prints enough digits for 1e-9 relative
+            assert!(
+                (r[c] - want).abs() <= 1e-9 * want.abs().max(1.0),
+                "column {c}: {} vs {want}",
+                r[c]
+            );
+        }
+    }
+    let as_built = run("as_built", Some("[as_built.skin_plate]\nthickness = 0.6\n"));
+    let moved = (2..base[0].len())
+        .filter(|&c| {
+            base.iter()
+                .zip(&as_built)
+                .any(|(b, r)| (b[c] - r[c]).abs() > 1e-6)
+        })
+        .count();
+    assert_eq!(
+        moved,
+        base[0].len() - 2,
+        "every gauge should see a thicker skin plate"
+    );
+    assert!(base.iter().zip(&as_built).all(|(b, r)| b[..2] == r[..2]));
+    let bad = d.join("bad.toml");
+    std::fs::write(&bad, "[as_built.skin_plate]\nthicknes = 0.6\n").unwrap();
+    fails_naming(
+        &[
+            "simulate",
+            "experiments",
+            "--scenario",
+            "1",
+            "--n",
+            "5",
+            "--gate",
+            &gate,
+            "--reality",
+            s(&bad),
+            "--out",
+            s(&d.join("x.csv")),
+        ],
+        &["bad.toml", "as_built.skin_plate.thicknes"],
     );
 }

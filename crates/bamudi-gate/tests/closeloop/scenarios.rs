@@ -236,7 +236,7 @@ fn report_files_are_written() {
     };
     let out = run(&record(base(2, fx)));
     let dir = std::env::temp_dir().join("bamudi_closeloop_demo");
-    let files = bamudi_gate::report::closeloop::write_report(&out, None, &dir).unwrap();
+    let files = bamudi_gate::report::closeloop::write_report(&out, None, None, &dir).unwrap();
     for f in &files {
         assert!(std::fs::metadata(f).unwrap().len() > 100, "{}", f.display());
     }

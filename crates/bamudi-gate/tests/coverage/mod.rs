@@ -34,7 +34,7 @@ fn hits(s: &ScenarioCoverage, level: f64) -> Coverage {
 #[test]
 fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
     let opts = CoverageOptions::quick();
-    let report = coverage::run(&opts, &|| {}).unwrap();
+    let report = coverage::run(&opts, &|_, _| {}).unwrap();
     let region = binomial_acceptance(opts.n_replicates, 0.95, ALPHA).unwrap();
     assert_eq!(
         region,

@@ -68,8 +68,10 @@ use stats::{CheckThresholds, adequacy, mse_rows, rmse_per_column};
 use std::sync::Arc;
 
 /// A model calibrated on measured data (BA-MUDI Modules 2-4, or a stand-in), with a scalar
-/// parameter `θ`.
-pub trait CalibratedModel: Send + Sync {
+/// parameter `θ`. `Any` lets an application get its own type back from the loop's final
+/// model ([`CloseLoopOutcome::model`]; `(m.as_ref() as &dyn Any).downcast_ref::<T>()`), e.g.
+/// to push the final calibration through a prediction model.
+pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
     /// Predictive mean and variance of a new measurement (output units and their square) at
     /// the input rows `x`, `θ` marginalised over its posterior; each `n x N_o`.
     fn predict(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)>;
@@ -198,6 +200,8 @@ pub struct CloseLoopReport {
 pub struct CloseLoopOutcome {
     /// The serialisable report.
     pub report: CloseLoopReport,
+    /// The loop's final calibration (on the data with the accepted effects removed).
+    pub model: Arc<dyn CalibratedModel>,
     /// Residuals before the loop (`n x N_o`, microstrain).
     pub residual_before: DMatrix<f64>,
     /// Residuals after the loop.
@@ -229,6 +233,15 @@ pub fn close_loop_with(
     library: &[Arc<dyn Effect>],
 ) -> Result<CloseLoopOutcome> {
     cfg.validate()?;
+    if rec.gauge_names.is_empty() {
+        return Err(BamudiError::config(
+            "gauge_columns",
+            format!(
+                "{}: the record has no gauge columns to close the loop on",
+                rec.file
+            ),
+        ));
+    }
     let n = rec.len();
     let n_cal = (cfg.calibration_fraction * n as f64).round() as usize;
     if n_cal < 30 || n - n_cal < 30 {
@@ -421,6 +434,7 @@ fn outcome(
     };
     Ok(CloseLoopOutcome {
         report,
+        model: Arc::clone(&st.model),
         residual_before: before.residual,
         residual_after: r_final,
         heldout_rows: lp.ho.to_vec(),

@@ -94,7 +94,8 @@ pub struct IngestConfig {
     pub time_column: String,
     /// The model's input columns, in model input order.
     pub input_columns: Vec<String>,
-    /// Output (gauge) columns, in model output order.
+    /// Output (gauge) columns, in model output order; none for a record of inputs only (a
+    /// load history), which the close loop refuses.
     pub gauge_columns: Vec<String>,
     /// Missing output values.
     pub missing: MissingPolicy,
@@ -142,12 +143,6 @@ struct Columns {
 
 impl Columns {
     fn locate(t: &Table, cfg: &IngestConfig) -> Result<Self> {
-        if cfg.gauge_columns.is_empty() {
-            return Err(BamudiError::config(
-                "gauge_columns",
-                "no gauge columns named",
-            ));
-        }
         let find = |names: &[String]| {
             names
                 .iter()

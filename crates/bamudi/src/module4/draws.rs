@@ -29,27 +29,47 @@ pub struct ResponseDraw {
     pub response: Vec<f64>,
 }
 
+/// The randomness of `n` joint draws, fixed so that the same draws can be evaluated at many
+/// conditions (a load history): per draw, the support point, `ρ`'s standard normal and the
+/// coefficients' standard normals. Evaluated at `x` ([`Predictor::draws_at`]), draw `k` is
+/// `ρ_k = ρ_j(x) + σ_ρ,j(x) z_ρ,k` and `α_k = μ_j(x) + (∂μ_j/∂ρ)(ρ_k − ρ_j) + L_Σ(x) z_k`:
+/// at every `x` a draw of the mixture of Eq. 52; along a history the same `z_k`, i.e. a
+/// coefficient error that stays the same from one condition to the next. That is the
+/// conservative choice for a sum over the history (a fatigue damage): errors that persist do
+/// not average out, so the sum's band is the widest the marginals allow.
+#[derive(Debug, Clone)]
+pub struct DrawPaths {
+    /// Support index per draw.
+    picks: Vec<usize>,
+    /// Standard normal of `ρ` per draw.
+    rho_z: Vec<f64>,
+    /// Standard normals of the coefficients per draw.
+    alpha_z: Vec<DVector<f64>>,
+}
+
+impl DrawPaths {
+    /// Number of draws.
+    pub fn len(&self) -> usize {
+        self.picks.len()
+    }
+
+    /// No draws.
+    pub fn is_empty(&self) -> bool {
+        self.picks.is_empty()
+    }
+}
+
 impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// `n` joint draws of the corrected distributed response at `x` (see the module docs).
     ///
     /// Their mean and spread agree with [`response`](Self::response) (the same mixture); their
     /// point-to-point correlation is what a nonlinear prediction model needs.
     pub fn response_draws(&self, x: &[f64], n: usize, seed: u64) -> Result<Vec<ResponseDraw>> {
-        let at = self.coef_at(x)?;
-        let l = self.basis().0;
-        let factor = match at.cov.iter().any(|v| *v != 0.0) {
-            true => Some(numerics::Cholesky::new(&at.cov, "coefficient covariance at x")?.l()),
-            false => None,
-        };
-        let responses = self
-            .support
-            .iter()
-            .map(|(theta, _)| {
-                let mut g = vec![0.0; l.nrows()];
-                self.model.unobservable.evaluate(x, theta, &mut g)?;
-                Ok(DVector::from_vec(g))
-            })
-            .collect::<Result<Vec<_>>>()?;
+        self.draws_at(&self.draw_paths(n, seed), x)
+    }
+
+    /// The randomness of `n` draws from the seed (see [`DrawPaths`]).
+    pub fn draw_paths(&self, n: usize, seed: u64) -> DrawPaths {
         let cumulative: Vec<f64> = self
             .support
             .iter()
@@ -59,24 +79,61 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             })
             .collect();
         let total = cumulative.last().copied().unwrap_or(0.0);
+        let n_coef = self.basis().0.ncols();
         let mut rng = StdRng::seed_from_u64(seed);
-        (0..n)
-            .map(|_| {
-                let u = rng.random::<f64>() * total;
-                let j = cumulative
-                    .partition_point(|c| *c < u)
-                    .min(self.support.len() - 1);
+        let mut paths = DrawPaths {
+            picks: Vec::with_capacity(n),
+            rho_z: Vec::with_capacity(n),
+            alpha_z: Vec::with_capacity(n),
+        };
+        for _ in 0..n {
+            let u = rng.random::<f64>() * total;
+            let j = cumulative.partition_point(|c| *c < u);
+            paths
+                .picks
+                .push(j.min(self.support.len().saturating_sub(1)));
+            paths.rho_z.push(standard_normal(&mut rng));
+            paths
+                .alpha_z
+                .push(DVector::from_fn(n_coef, |_, _| standard_normal(&mut rng)));
+        }
+        paths
+    }
+
+    /// The draws of `paths` at `x`; the model is evaluated once per support point the draws
+    /// use.
+    pub fn draws_at(&self, paths: &DrawPaths, x: &[f64]) -> Result<Vec<ResponseDraw>> {
+        let at = self.coef_at(x)?;
+        let l = self.basis().0;
+        let factor = match at.cov.iter().any(|v| *v != 0.0) {
+            true => Some(numerics::Cholesky::new(&at.cov, "coefficient covariance at x")?.l()),
+            false => None,
+        };
+        let mut responses: Vec<Option<DVector<f64>>> = vec![None; self.support.len()];
+        for &j in &paths.picks {
+            if responses[j].is_none() {
+                let mut g = vec![0.0; l.nrows()];
+                self.model
+                    .unobservable
+                    .evaluate(x, &self.support[j].0, &mut g)?;
+                responses[j] = Some(DVector::from_vec(g));
+            }
+        }
+        (0..paths.len())
+            .map(|k| {
+                let j = paths.picks[k];
                 let (rho_j, rho_var) = at.rho[j];
-                let rho = rho_j + rho_var.max(0.0).sqrt() * standard_normal(&mut rng);
+                let rho = rho_j + rho_var.max(0.0).sqrt() * paths.rho_z[k];
                 let mut alpha = &at.mean[j] + &at.slope[j] * (rho - rho_j);
                 if let Some(f) = &factor {
-                    let z = DVector::from_fn(f.ncols(), |_, _| standard_normal(&mut rng));
-                    alpha += f * z;
+                    alpha += f * &paths.alpha_z[k];
                 }
-                let response = &responses[j] * rho + l * alpha;
+                let g = responses[j].as_ref().ok_or_else(|| {
+                    BamudiError::config("draws", "a draw's support point was not evaluated")
+                })?;
                 Ok(ResponseDraw {
                     theta: self.support[j].0.clone(),
-                    response: response.iter().copied().collect(),
+                    response: (g * rho + l * alpha).iter().copied().collect(),
                 })
             })
             .collect()
@@ -118,7 +175,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 }
 
 /// Mean, sd and the 2.5 % / 97.5 % empirical quantiles (linear interpolation) per output.
-fn empirical_band(mut values: Vec<Vec<f64>>) -> Band {
+pub fn empirical_band(mut values: Vec<Vec<f64>>) -> Band {
     let mut band = Band {
         mean: vec![],
         sd: vec![],

@@ -18,7 +18,7 @@
 
 mod draws;
 
-pub use draws::ResponseDraw;
+pub use draws::{DrawPaths, ResponseDraw, empirical_band};
 
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
