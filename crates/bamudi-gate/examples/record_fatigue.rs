@@ -20,7 +20,7 @@ use bamudi_gate::gate;
 use bamudi_gate::record_fatigue::{LoadHistory, RecordFatigueOptions, record_fatigue};
 use mitergate::data::field::FieldConfig;
 use mitergate::reality::Reality;
-use mitergate::{ContactModel, GateConfig, QuoinBlockModel, QuoinBlockParams};
+use mitergate::{GateConfig, QuoinBlockModel, QuoinBlockParams};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let seeds: u64 = std::env::args().nth(1).map_or(Ok(5), |s| s.parse())?;
@@ -29,14 +29,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => Reality::default(),
     };
     let drawing = GateConfig::default();
-    reality.check(&drawing)?;
     let (contact, _) = mitergate::build_contact(&drawing)?;
     let calibrator = GateCalibrator::new(contact.clone(), (60.0, 150.0))?;
-    let (truth_gate, _) = mitergate::build_contact(&reality.truth_gate(&drawing)?)?;
-    let truth_contact = ContactModel::new(
-        truth_gate.gate().clone(),
-        reality.contact_params(truth_gate.params().clone()),
-    )?;
+    let truth_contact = gate::build_truth(&reality, &drawing)?;
     let block = QuoinBlockModel::new(
         QuoinBlockParams::default(),
         contact.gate().nu_points.clone(),
@@ -54,10 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .noise_sd(1.0)
             .gap(gap);
         let mut rec = gate::simulate_field(&field, &truth_contact)?;
-        let (t0, t1) = (rec.time_unix_s[0], rec.time_unix_s[rec.len() - 1]);
-        for (row, t) in rec.strains.iter_mut().zip(&rec.time_unix_s) {
-            reality.apply_sensors(&rec.gauge_names, (t - t0) as f64 / (t1 - t0) as f64, row);
-        }
+        reality.apply_to_field(&mut rec);
         let data = gate::as_measured(&rec, calibrator.model(), "record.csv")?;
         let cal = calibrator.calibrate_gate(&data.x, &data.y)?;
         let x = (0..rec.len())

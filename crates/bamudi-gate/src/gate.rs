@@ -85,6 +85,27 @@ pub fn read_record(
     Ok(rec)
 }
 
+/// The truth's contact model of a reality: the as-built gate (with the truth's mesh) built
+/// and condensed, with the reality's wall support; the reality is checked against `drawing`
+/// first.
+pub fn build_truth(
+    reality: &mitergate::reality::Reality,
+    drawing: &GateConfig,
+) -> Result<ContactModel> {
+    reality.check(drawing)?;
+    let (built, _, _) = build(&reality.truth_gate(drawing)?)?;
+    let params = reality.contact_params(built.params().clone());
+    Ok(ContactModel::new(built.gate().clone(), params)?)
+}
+
+/// The load history of a record: its levels and times.
+pub fn load_history(rec: &MeasuredRecord) -> Result<crate::record_fatigue::LoadHistory> {
+    let x = (0..rec.len())
+        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
+        .collect();
+    crate::record_fatigue::LoadHistory::new(x, rec.time_h.clone())
+}
+
 /// Checks every row's levels against the gate's input domain.
 pub fn check_record(rec: &MeasuredRecord, model: &GateMultiLevel) -> Result<()> {
     let u = &model.unobservable;

@@ -249,6 +249,18 @@ impl Reality {
         }
     }
 
+    /// Applies the sensor errors to every row of a field record, `s` being the row's time as
+    /// a fraction of the record's span.
+    pub fn apply_to_field(&self, rec: &mut crate::data::field::FieldRecord) {
+        let (Some(&t0), Some(&t1)) = (rec.time_unix_s.first(), rec.time_unix_s.last()) else {
+            return;
+        };
+        for (row, t) in rec.strains.iter_mut().zip(&rec.time_unix_s) {
+            let position = (t - t0) as f64 / (t1 - t0).max(1) as f64;
+            self.apply_sensors(&rec.gauge_names, position, row);
+        }
+    }
+
     /// Whether anything differs from the drawing.
     pub fn is_identity(&self) -> bool {
         *self == Self::default()

@@ -11,9 +11,7 @@ use bamudi_gate::calibrator::{CalibratedGate, GateCalibrator};
 use bamudi_gate::gate;
 use bamudi_gate::output::StagedDir;
 use bamudi_gate::progress::Bars;
-use bamudi_gate::record_fatigue::{
-    self, LoadHistory, RecordFatigue, RecordFatigueOptions, record_fatigue,
-};
+use bamudi_gate::record_fatigue::{self, RecordFatigue, RecordFatigueOptions, record_fatigue};
 use bamudi_gate::report::calibration::ReportInputs;
 use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::UnobservableModel;
@@ -151,10 +149,7 @@ fn loop_fatigue(out: &CloseLoopOutcome, rec: &MeasuredRecord, seed: u64) -> Resu
         QuoinBlockParams::default(),
         model.unobservable.coordinates().to_vec(),
     )?;
-    let x = (0..rec.len())
-        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
-        .collect();
-    let history = LoadHistory::new(x, rec.time_h.clone())?;
+    let history = gate::load_history(rec)?;
     let opts = RecordFatigueOptions {
         seed,
         ..RecordFatigueOptions::default()

@@ -203,11 +203,7 @@ fn load_history(record: &std::path::Path, model: &GateMultiLevel) -> Result<Load
     let ingest = bamudi::closeloop::IngestConfig::new(&["h_up", "h_down"], &[]);
     let rec = bamudi_gate::gate::read_record(record, model, &ingest)
         .with_context(|| format!("--record {}", record.display()))?;
-    let x = (0..rec.len())
-        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
-        .collect();
-    LoadHistory::new(x, rec.time_h.clone())
-        .with_context(|| format!("--record {}", record.display()))
+    bamudi_gate::gate::load_history(&rec).with_context(|| format!("--record {}", record.display()))
 }
 
 /// The hot spot: the quoin point of the largest mean damage rate.

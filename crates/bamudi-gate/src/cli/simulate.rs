@@ -94,12 +94,8 @@ fn truth_contact(
         return Ok((build_contact(&drawing)?, Reality::default()));
     };
     let r = Reality::from_file(path).with_context(|| format!("--reality {}", path.display()))?;
-    r.check(&drawing)
+    let contact = bamudi_gate::gate::build_truth(&r, &drawing)
         .with_context(|| format!("--reality {}", path.display()))?;
-    let truth = build_contact(&r.truth_gate(&drawing)?)?;
-    let params = r.contact_params(truth.params().clone());
-    let contact = mitergate::ContactModel::new(truth.gate().clone(), params)
-        .with_context(|| format!("--reality {}: the support", path.display()))?;
     eprintln!("truth: the reality of {}", path.display());
     Ok((contact, r))
 }
@@ -181,11 +177,7 @@ fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
     check_file_destination("--out", &a.out)?;
     let (contact, reality) = truth_contact(gate, a.reality.as_deref())?;
     let mut rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;
-    let (t0, t1) = (rec.time_unix_s[0], rec.time_unix_s[rec.len() - 1]);
-    for (row, t) in rec.strains.iter_mut().zip(&rec.time_unix_s) {
-        let position = (t - t0) as f64 / (t1 - t0).max(1) as f64;
-        reality.apply_sensors(&rec.gauge_names, position, row);
-    }
+    reality.apply_to_field(&mut rec);
     rec.write_csv(&a.out)
         .with_context(|| format!("writing {}", a.out.display()))?;
     eprintln!(
