@@ -5,10 +5,15 @@
 //! * `coverage [--quick] [--estimator exact|lstm|ridge] [--replicates N] [--experiments N]
 //!   [--mesh IN] [--modes LIST] [--threads N] [--seed N] [--json PATH] [--out DIR]`: the
 //!   coverage study of the θ intervals and force bands; writes `docs/results/coverage*.md`.
+//! * `adequacy [--seeds N] [--clean-seeds N] [--scenarios LIST] [--experiments N] [--mesh IN]
+//!   [--seed N] [--only TEXT] [--json PATH] [--out DIR]`: the adequacy verdict over a matrix of
+//!   as-built gates and sensor faults, and its false-alarm rate on clean data; writes
+//!   `docs/results/adequacy.md`.
 //! * `calculix-check [--element-size IN] [--dir DIR] [--ccx PATH] [--equation] [--report PATH]`:
 //!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
 //!   displacements (needs `ccx` on PATH; see docs/verification.md).
 
+mod adequacy;
 mod calculix;
 mod coverage;
 mod plots;
@@ -52,6 +57,9 @@ enum Task {
     /// The coverage study: do the θ intervals and force bands hold the truth as often as they
     /// claim? (simulation-based calibration over replicate data sets)
     Coverage(coverage::CoverageArgs),
+    /// The adequacy verdict over realities that differ from the model (as-built gates, sensor
+    /// faults) and its false-alarm rate on clean data.
+    Adequacy(adequacy::AdequacyArgs),
     /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
     CalculixCheck {
         /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
@@ -84,6 +92,7 @@ fn main() -> Result<()> {
             sensitivity,
         } => reproduce(quick, json, out, seed, no_sensitivity, sensitivity),
         Task::Coverage(args) => coverage::run(&args),
+        Task::Adequacy(args) => adequacy::run(&args),
         Task::CalculixCheck {
             element_size,
             dir,

@@ -155,7 +155,8 @@ impl GateCalibrator {
         if let Some(o) = &self.observer {
             run = run.observer(o.as_ref());
         }
-        let cal = run.run(self.model.as_ref(), &exps)?;
+        let mut cal = run.run(self.model.as_ref(), &exps)?;
+        crate::physics::add_physics_checks(&mut cal, &self.model, &exps.x)?;
         Ok(CalibratedGate {
             model: Arc::clone(&self.model),
             cal,
@@ -295,5 +296,9 @@ impl CalibratedModel for CalibratedGate {
     /// The discrepancy `δ(x)` (GPs over the load inputs) absorbs load-shaped residuals.
     fn absorbs_load_functions(&self) -> bool {
         true
+    }
+
+    fn adequacy(&self) -> Option<&bamudi::AdequacyReport> {
+        self.cal.adequacy()
     }
 }

@@ -26,6 +26,7 @@ pub mod error;
 pub mod gate;
 pub mod output;
 pub mod paper;
+pub mod physics;
 pub mod progress;
 pub mod record_fatigue;
 pub mod report;

@@ -6,6 +6,7 @@
 //! data and the model, the results of both modules and the timings; Module 4 is its
 //! [`predictor`](Calibration::predictor).
 
+use crate::adequacy::{self, AdequacyReport, Check};
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
 use crate::module2::estimator::FittedEstimator;
@@ -37,6 +38,9 @@ pub struct Timings {
     pub coefficients_s: f64,
     /// Module 3: covariance factorisation and posterior of `θ` (both variants).
     pub module3_s: f64,
+    /// The adequacy checks.
+    #[serde(default)]
+    pub adequacy_s: f64,
 }
 
 impl Timings {
@@ -67,6 +71,10 @@ pub struct Calibration {
     module2: Module2,
     module3: Module3,
     timings: Timings,
+    /// The adequacy verdict ([`crate::adequacy`]; absent when disabled or in files saved
+    /// before it existed).
+    #[serde(default)]
+    adequacy: Option<AdequacyReport>,
     /// The marginal mode's factorisation, rebuilt on first use by Module 4.
     #[serde(skip)]
     marginal_state: std::sync::OnceLock<std::sync::Arc<marginal::MarginalState>>,
@@ -232,16 +240,48 @@ impl<'a> Calibrate<'a> {
                 marginal::posterior(&p, &m2, &ctx, sigma0)
             })?,
         };
-        Ok(Calibration {
+        let mut cal = Calibration {
             config: self.cfg.clone(),
             signature: ModelSignature::of(p.model),
             x_experiments: p.exps.x.clone(),
-            parts: p.parts,
+            parts: p.parts.clone(),
             module2: m2,
             module3: m3,
             timings: t,
+            adequacy: None,
             marginal_state: std::sync::OnceLock::new(),
-        })
+        };
+        let mut timings = cal.timings.clone();
+        cal.adequacy = self.adequacy(&p, &cal, &mut timings)?;
+        cal.timings = timings;
+        Ok(cal)
+    }
+
+    /// The adequacy checks; a numerical failure inside them is logged and reported as "not
+    /// assessed" (the calibration itself stands).
+    fn adequacy<U, O>(
+        &self,
+        p: &Problem<'_, U, O>,
+        cal: &Calibration,
+        t: &mut Timings,
+    ) -> Result<Option<AdequacyReport>>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let params = &self.cfg.adequacy;
+        if !params.enabled {
+            return Ok(None);
+        }
+        let mut seconds = 0.0;
+        let report = self.stage(Stage::Adequacy, &mut seconds, || {
+            Ok(adequacy::assess(p, cal, params).unwrap_or_else(|e| {
+                log::warn!("adequacy checks failed to run: {e}");
+                AdequacyReport::not_assessed(format!("the checks failed: {e}"), params.family_alpha)
+            }))
+        })?;
+        t.adequacy_s = seconds;
+        Ok(Some(report))
     }
 
     /// Runs one stage: reports its start and end, and adds its wall time to `seconds`.
@@ -291,6 +331,20 @@ impl Calibration {
     /// Seconds per stage.
     pub fn timings(&self) -> &Timings {
         &self.timings
+    }
+    /// The adequacy verdict and its checks (`None` when disabled).
+    pub fn adequacy(&self) -> Option<&AdequacyReport> {
+        self.adequacy.as_ref()
+    }
+
+    /// Adds an application's own checks (e.g. physical ones) to the verdict. Each check's
+    /// `passed` is taken as given (tolerance checks; they do not enter the p-value family);
+    /// a failed one makes the verdict inadequate and is listed, attributed to the model's
+    /// form. Nothing happens when the checks are disabled.
+    pub fn add_adequacy_checks(&mut self, checks: Vec<Check>) {
+        if let Some(a) = self.adequacy.as_mut() {
+            a.add_tolerance_checks(checks);
+        }
     }
     /// `A`, `L` and `B = A L` of the calibrated model.
     pub fn parts(&self) -> &LinearParts {

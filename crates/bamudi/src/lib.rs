@@ -16,6 +16,8 @@
 //! 5. [`module4`]: the one predictor of responses and outputs with bands (Eq. 44, 52).
 //! 6. [`data`]: CSV tables with located errors (`ndarray`), experiments, atomic writes.
 //! 7. [`closeloop`]: find what a calibrated model misses in a measured record.
+//! 8. [`adequacy`]: the verdict on every (marginal-mode) calibration: is the model adequate
+//!    for the data, and if not, is it a sensor or the model's form?
 //!
 //! # Example
 //!
@@ -26,6 +28,7 @@
 //! their `θ` intervals can be over-confident; `ρ` is weakly identified when `θ`'s prior is wide
 //! (Eq. 31 smears `g_u`).
 
+pub mod adequacy;
 pub mod calibration;
 pub mod closeloop;
 pub mod data;
@@ -43,6 +46,7 @@ pub mod validation;
 #[cfg(doctest)]
 pub struct ReadmeDoctest;
 
+pub use adequacy::{AdequacyParams, AdequacyReport, Verdict};
 pub use calibration::{Calibrate, Calibration, Timings, calibrate};
 pub use data::Experiments;
 pub use error::{BamudiError, Result};

@@ -38,6 +38,8 @@ pub enum Stage {
     Coefficients,
     /// Module 3: the covariance and the `θ` posteriors.
     Module3,
+    /// The adequacy checks ([`crate::adequacy`]).
+    Adequacy,
 }
 
 impl Stage {
@@ -50,6 +52,7 @@ impl Stage {
             Self::CoefficientGps => "Module 2: coefficient GPs",
             Self::Coefficients => "Module 3: coefficients",
             Self::Module3 => "Module 3: theta posterior",
+            Self::Adequacy => "adequacy checks",
         }
     }
 }

@@ -429,6 +429,8 @@ pub struct CalibrationParams {
     pub coefficients: CoefficientMode,
     /// The coefficients' prior in the marginal mode.
     pub marginal: MarginalPrior,
+    /// The adequacy checks run after Module 3.
+    pub adequacy: crate::adequacy::AdequacyParams,
     /// Master seed; every random step derives its seed from it.
     pub seed: u64,
     /// Worker threads (`None`: rayon's default). The engine does not start threads of its own;
@@ -450,6 +452,7 @@ impl Default for CalibrationParams {
             mcmc: McmcConfig::default(),
             coefficients: CoefficientMode::Marginal,
             marginal: MarginalPrior::default(),
+            adequacy: crate::adequacy::AdequacyParams::default(),
             seed: 2021,
             threads: None,
         }
@@ -538,6 +541,13 @@ impl CalibrationParams {
             return Err(BamudiError::config(
                 "rho",
                 format!("need finite lo < hi, got [{}, {}]", r.lo, r.hi),
+            ));
+        }
+        let alpha = self.adequacy.family_alpha;
+        if !(alpha > 0.0 && alpha < 0.5) {
+            return Err(BamudiError::config(
+                "adequacy.family_alpha",
+                format!("must be in (0, 0.5), got {alpha}"),
             ));
         }
         if let Some(s) = self.sigma_eps

@@ -139,7 +139,8 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
         saved.gap_prior.1
     );
     let bars = Bars::new();
-    let cal = Calibrate::new(&config).observer(&bars).run(&model, &exps)?;
+    let mut cal = Calibrate::new(&config).observer(&bars).run(&model, &exps)?;
+    bamudi_gate::physics::add_physics_checks(&mut cal, &model, &exps.x)?;
     let warnings = posterior_warnings(&cal, saved.gap_prior);
     for w in &warnings {
         log::warn!("{w}");
@@ -269,10 +270,23 @@ fn print_summary(cal: &Calibration, dir: &Path) {
             "configured"
         }
     );
+    if let Some(a) = cal.adequacy() {
+        let written = match a.verdict {
+            bamudi::Verdict::Inadequate => " (results written; see report.md)",
+            _ => "",
+        };
+        println!("adequacy: {}{written}", a.summary());
+    }
     let t = cal.timings();
     println!(
-        "timings (s): training set {:.1}, estimator {:.1}, rho {:.1}, GPs {:.1}, coefficients {:.1}, Module 3 {:.1}",
-        t.training_set_s, t.estimator_s, t.rho_s, t.gp_s, t.coefficients_s, t.module3_s
+        "timings (s): training set {:.1}, estimator {:.1}, rho {:.1}, GPs {:.1}, coefficients {:.1}, Module 3 {:.1}, adequacy {:.1}",
+        t.training_set_s,
+        t.estimator_s,
+        t.rho_s,
+        t.gp_s,
+        t.coefficients_s,
+        t.module3_s,
+        t.adequacy_s
     );
     println!("results in {}", dir.display());
 }

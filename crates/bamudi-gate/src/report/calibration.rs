@@ -109,6 +109,9 @@ pub struct Results {
     covariance: FactorReport,
     timings_s: Timings,
     inputs: serde_json::Value,
+    /// The adequacy verdict and its checks (absent when disabled).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    adequacy: Option<bamudi::AdequacyReport>,
 }
 
 impl Results {
@@ -144,6 +147,7 @@ impl Results {
             covariance: m3.covariance,
             timings_s: cal.timings().clone(),
             inputs: with_version(inputs),
+            adequacy: cal.adequacy().cloned(),
         }
     }
 }
@@ -414,6 +418,7 @@ pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
 fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
     let (m2, m3) = (cal.module2(), cal.module3());
     let mut s = String::from("# BA-MUDI calibration report\n\n");
+    s += &super::adequacy::banner(cal.adequacy());
     s += &inputs_markdown(inputs);
     s += &format!(
         "* estimator: `{}` (training pool: {} distinct x)\n",
@@ -453,6 +458,10 @@ fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
                 ci.1
             );
         }
+    }
+    if let Some(a) = cal.adequacy() {
+        s += "\n";
+        s += &super::adequacy::section(a);
     }
     let t = cal.timings();
     s += &format!(

@@ -27,6 +27,19 @@ pub fn markdown(r: &CloseLoopReport) -> String {
         r.noise_sd_estimate
     );
     let _ = writeln!(s, "**Conclusion:** {}\n", r.conclusion);
+    for (when, a) in [
+        ("first", &r.model_adequacy_before),
+        ("final", &r.model_adequacy_after),
+    ] {
+        if let Some(a) = a {
+            let _ = writeln!(
+                s,
+                "* the {when} calibration's adequacy verdict: {}",
+                a.summary()
+            );
+        }
+    }
+    s.push('\n');
     rmse_table(&mut s, r);
     effects_section(&mut s, r);
     steps_section(&mut s, r);

@@ -44,7 +44,7 @@ mod features;
 mod nuisance;
 mod record;
 mod search;
-mod stats;
+pub(crate) mod stats;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
 
@@ -97,6 +97,11 @@ pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
     /// ```
     fn absorbs_load_functions(&self) -> bool {
         false
+    }
+    /// The calibration's own adequacy verdict ([`crate::adequacy`]), when it has one: a
+    /// discrepancy that absorbed a sensor fault leaves clean residuals but fails it.
+    fn adequacy(&self) -> Option<&crate::adequacy::AdequacyReport> {
+        None
     }
 }
 
@@ -193,6 +198,12 @@ pub struct CloseLoopReport {
     pub steps: Vec<StepReport>,
     /// One-sentence conclusion.
     pub conclusion: String,
+    /// The first calibration's adequacy verdict (when the calibrated model has one).
+    #[serde(default)]
+    pub model_adequacy_before: Option<crate::adequacy::AdequacyReport>,
+    /// The final calibration's adequacy verdict.
+    #[serde(default)]
+    pub model_adequacy_after: Option<crate::adequacy::AdequacyReport>,
 }
 
 /// Result of [`close_loop`]: the report plus the residual series used for the plots.
@@ -268,7 +279,8 @@ pub fn close_loop_with(
             .and_then(|l| LoadNuisance::new(&rec.x, l, &cal)),
     };
     let (model, mean, var) = lp.calibrate(lp.y)?;
-    let before = Before::of(&lp, model.theta_summary(), &mean, &var);
+    let mut before = Before::of(&lp, model.theta_summary(), &mean, &var);
+    before.adequacy = model.adequacy().cloned();
     let mut st = State {
         model,
         mean,
@@ -300,6 +312,7 @@ struct Before {
     rmse: Vec<f64>,
     noise_sd: f64,
     theta: ThetaSummary,
+    adequacy: Option<crate::adequacy::AdequacyReport>,
 }
 
 impl Before {
@@ -317,6 +330,7 @@ impl Before {
             rmse: rmse_per_column(&r0, lp.ho),
             noise_sd: noise[noise.len() / 2],
             theta,
+            adequacy: None,
             residual: r0,
         }
     }
@@ -345,7 +359,7 @@ fn run_steps(
     for step in 1..=lp.cfg.max_steps {
         let r = lp.residual(st)?;
         let checks = windows(lp, &r, &st.var);
-        if checks.iter().all(Adequacy::passed) {
+        if checks.iter().all(Adequacy::passed) && !model_inadequate(st) {
             let c = if st.effects.is_empty() {
                 "no missing effect found: residuals pass every adequacy check"
             } else {
@@ -366,8 +380,7 @@ fn run_steps(
         };
         let Some((next, name, decision)) = outcome.accepted else {
             steps.push(report);
-            let failures: usize = checks.iter().map(|c| c.failures.len()).sum();
-            return Ok((steps, stop_conclusion(st, &outcome.decision, failures)));
+            return Ok((steps, stop_conclusion(st, &outcome.decision, &checks)));
         };
         *st = next;
         report.accepted = Some(name);
@@ -382,13 +395,43 @@ fn run_steps(
     ))
 }
 
-/// Why the loop stopped when a step accepted nothing.
-fn stop_conclusion(st: &State, decision: &str, failures: usize) -> String {
-    if st.effects.is_empty() {
-        format!("no missing effect found: {decision}; remaining check failures: {failures}")
-    } else {
-        format!("stopped after {} effect(s): {decision}", st.effects.len())
+/// Whether the current calibration's own verdict says its model does not explain the data.
+fn model_inadequate(st: &State) -> bool {
+    st.model
+        .adequacy()
+        .is_some_and(|a| a.verdict == crate::adequacy::Verdict::Inadequate)
+}
+
+/// Why the loop stopped when a step accepted nothing. "No missing effect found" is never
+/// said while a check fails: the conclusion then names what is unexplained.
+fn stop_conclusion(st: &State, decision: &str, checks: &[Adequacy]) -> String {
+    let mut unexplained: Vec<String> = checks
+        .iter()
+        .flat_map(|c| {
+            c.failures
+                .iter()
+                .map(move |f| format!("{} window: {f}", c.window))
+        })
+        .take(3)
+        .collect();
+    let failures: usize = checks.iter().map(|c| c.failures.len()).sum();
+    if failures > unexplained.len() {
+        unexplained.push(format!(
+            "{} more residual check(s)",
+            failures - unexplained.len()
+        ));
     }
+    if let Some(a) = st.model.adequacy().filter(|_| model_inadequate(st)) {
+        unexplained.push(format!("the calibration's verdict: {}", a.summary()));
+    }
+    let head = match st.effects.len() {
+        0 => "no effect in the library explains the data".to_string(),
+        n => format!("stopped after {n} effect(s)"),
+    };
+    format!(
+        "{head}; unexplained: {}; {decision}",
+        unexplained.join("; ")
+    )
 }
 
 /// Assembles the outcome of a finished run.
@@ -431,6 +474,8 @@ fn outcome(
         checks_after,
         steps,
         conclusion,
+        model_adequacy_before: before.adequacy,
+        model_adequacy_after: st.model.adequacy().cloned(),
     };
     Ok(CloseLoopOutcome {
         report,

@@ -106,7 +106,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         let at = self.coef_at(x)?;
         let l = self.basis().0;
         let factor = match at.cov.iter().any(|v| *v != 0.0) {
-            true => Some(numerics::Cholesky::new(&at.cov, "coefficient covariance at x")?.l()),
+            true => Some(covariance_factor(&at.cov, x)?),
             false => None,
         };
         let mut responses: Vec<Option<DVector<f64>>> = vec![None; self.support.len()];
@@ -200,6 +200,40 @@ pub fn empirical_band(mut values: Vec<Vec<f64>>) -> Band {
     band
 }
 
+/// Largest negative eigenvalue, relative to the largest, that [`covariance_factor`] sets to
+/// zero. The marginal mode's coefficient covariance at `x` is the prior minus what the data
+/// explain, with the prior's kernel matrix at the experiments truncated to its leading
+/// eigenvalues (`module3::marginal::lowrank`): where the data pin a direction down, the
+/// subtraction can overshoot the prior by the truncated mass (measured: −4.3e-5 of the largest
+/// eigenvalue at a low-head experiment of an as-built gate, where `bamudi predict` failed
+/// before). Anything more negative is not truncation and stays an error.
+const INDEFINITE_TOLERANCE: f64 = 1e-3;
+
+/// A factor `F` with `F Fᵀ = cov`: the Cholesky factor, or, when `cov` is indefinite by
+/// round-off of the low-rank prior (see [`INDEFINITE_TOLERANCE`]), the eigen-factor with the
+/// negative eigenvalues set to zero (logged).
+fn covariance_factor(cov: &nalgebra::DMatrix<f64>, x: &[f64]) -> Result<nalgebra::DMatrix<f64>> {
+    let what = "coefficient covariance at x";
+    let chol_err = match numerics::Cholesky::new(cov, what) {
+        Ok(c) => return Ok(c.l()),
+        Err(e) => e,
+    };
+    let eig = numerics::SymmetricEigen::new(cov, what)?;
+    let max = eig.values.iter().copied().fold(0.0f64, f64::max);
+    let min = eig.values.iter().copied().fold(f64::INFINITY, f64::min);
+    if min < -INDEFINITE_TOLERANCE * max {
+        return Err(chol_err.into());
+    }
+    log::warn!(
+        "{what} {x:?} is indefinite (smallest eigenvalue {min:.3e}, largest {max:.3e}); the \
+         negative eigenvalues are set to zero"
+    );
+    let n = cov.nrows();
+    Ok(nalgebra::DMatrix::from_fn(n, n, |i, j| {
+        eig.vectors[(i, j)] * eig.values[j].max(0.0).sqrt()
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -210,5 +244,25 @@ mod tests {
         let b = empirical_band(vec![v]);
         assert_eq!(b.mean[0], 500.0);
         assert!((b.lower[0] - 25.0).abs() < 1e-9 && (b.upper[0] - 975.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_slightly_indefinite_covariance_is_factored_and_a_clearly_indefinite_one_is_refused() {
+        // eigenvalues 4, 1 and −1e-3 (relative −2.5e-4: beyond the Cholesky jitter ladder's top,
+        // 1e-4 of the mean diagonal, within the tolerance) in a rotated basis
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let q = nalgebra::DMatrix::from_fn(3, 3, |i, j| r[(i, j)]);
+        let with = |l: [f64; 3]| {
+            let d = nalgebra::DMatrix::from_diagonal(&nalgebra::DVector::from_row_slice(&l));
+            &q * d * q.transpose()
+        };
+        let f = covariance_factor(&with([4.0, 1.0, -1e-3]), &[0.0]).unwrap();
+        // F Fᵀ is the matrix with the negative eigenvalue set to zero (round-off only)
+        assert!((&f * f.transpose() - with([4.0, 1.0, 0.0])).amax() < 1e-12);
+        assert!(covariance_factor(&with([4.0, 1.0, -0.1]), &[0.0]).is_err());
+        // positive definite: the Cholesky factor, as before
+        let c = with([4.0, 1.0, 0.5]);
+        let l = covariance_factor(&c, &[0.0]).unwrap();
+        assert_eq!(l, numerics::Cholesky::new(&c, "c").unwrap().l());
     }
 }

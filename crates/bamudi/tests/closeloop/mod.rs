@@ -128,3 +128,68 @@ fn an_effect_of_the_users_own_joins_the_library_and_is_found() {
         r.heldout_rmse_total_after
     );
 }
+
+/// A calibrated model whose own adequacy verdict fails (as a discrepancy that absorbed a
+/// sensor fault would: its residuals look clean).
+#[derive(Debug)]
+struct Flagged(
+    Box<dyn bamudi::closeloop::CalibratedModel>,
+    bamudi::AdequacyReport,
+);
+
+impl bamudi::closeloop::CalibratedModel for Flagged {
+    fn predict(&self, x: &DMatrix<f64>) -> bamudi::Result<(DMatrix<f64>, DMatrix<f64>)> {
+        self.0.predict(x)
+    }
+    fn predict_at_theta(&self, x: &DMatrix<f64>, theta: &[f64]) -> bamudi::Result<DMatrix<f64>> {
+        self.0.predict_at_theta(x, theta)
+    }
+    fn theta_summary(&self) -> bamudi::closeloop::ThetaSummary {
+        self.0.theta_summary()
+    }
+    fn theta_bounds(&self) -> (f64, f64) {
+        self.0.theta_bounds()
+    }
+    fn adequacy(&self) -> Option<&bamudi::AdequacyReport> {
+        Some(&self.1)
+    }
+}
+
+struct FlaggingCalibrator(GridCalibrator);
+
+impl bamudi::closeloop::Calibrator for FlaggingCalibrator {
+    fn calibrate(
+        &self,
+        x: &DMatrix<f64>,
+        y: &DMatrix<f64>,
+    ) -> bamudi::Result<Box<dyn bamudi::closeloop::CalibratedModel>> {
+        use bamudi::adequacy::{Attribution, FailedCheck, Verdict};
+        let mut report = bamudi::AdequacyReport::not_assessed("", 0.01);
+        report.verdict = Verdict::Inadequate;
+        report.reason = None;
+        report.failed.push(FailedCheck {
+            check: "sensor_offset".into(),
+            gauges: vec!["g3".into()],
+            attribution: Attribution::Sensor,
+            detail: "g3 offset +8.000 ± 0.900".into(),
+        });
+        Ok(Box::new(Flagged(self.0.calibrate(x, y)?, report)))
+    }
+}
+
+#[test]
+fn no_missing_effect_is_never_concluded_while_the_calibration_is_inadequate() {
+    let gate = ToyGate::default();
+    let rec = record_with(&gate, ROWS, 1, |_, _| 0.0).unwrap();
+    let cal = FlaggingCalibrator(GridCalibrator::new(gate, GAP_BOUNDS));
+    let out = close_loop(&rec, &cal, &config()).unwrap();
+    let c = &out.report.conclusion;
+    // the same record passes every residual check (noise_alone_adds_no_effect, seed 1)
+    assert!(!c.starts_with("no missing effect found"), "{c}");
+    assert!(
+        c.contains("unexplained") && c.contains("sensor_offset [g3] (sensor)"),
+        "{c}"
+    );
+    let after = out.report.model_adequacy_after.as_ref().unwrap();
+    assert_eq!(after.verdict, bamudi::Verdict::Inadequate);
+}

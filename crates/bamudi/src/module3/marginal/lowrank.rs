@@ -213,6 +213,14 @@ impl Spectrum {
         n_obs as f64 * sigma2.ln() + self.lambda.iter().map(|l| (t * l).ln_1p()).sum::<f64>()
     }
 
+    /// `Q (I + tΛ)^{-1/2}` (`R x R`): with it `Z = W Q (I + tΛ)^{-1/2}` gives
+    /// `V⁻¹ = σ⁻² (I − t Z Zᵀ)`, whose blocks are cheap.
+    pub fn scaled_basis(&self, t: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(self.q.nrows(), self.q.ncols(), |i, j| {
+            self.q[(i, j)] / (1.0 + t * self.lambda[j]).sqrt()
+        })
+    }
+
     /// `(Qᵀa)ᵀ (I + tΛ)⁻¹ (Qᵀb)` from rotated `qa`, `qb`.
     pub fn core(&self, qa: &DMatrix<f64>, qb: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
         let scaled = DMatrix::from_fn(qb.nrows(), qb.ncols(), |i, j| {

@@ -223,6 +223,16 @@ impl Covariance {
         self.s / self.sigma2
     }
 
+    /// The noise variance `σ²` (output units squared).
+    pub(crate) fn sigma2(&self) -> f64 {
+        self.sigma2
+    }
+
+    /// `Z = W Q (I + tΛ)^{-1/2}` (`N_s x R`): `V⁻¹ = σ⁻² (I − t Z Zᵀ)`.
+    pub(crate) fn whitened_factor(&self) -> DMatrix<f64> {
+        self.lr.w(&self.spectrum.scaled_basis(self.t()))
+    }
+
     fn log_det(&self) -> f64 {
         self.spectrum
             .log_det(self.lr.n_obs(), self.t(), self.sigma2)

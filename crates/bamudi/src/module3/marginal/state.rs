@@ -34,6 +34,11 @@ impl MarginalState {
         })
     }
 
+    /// The factored marginal covariance `V` of the observations.
+    pub(crate) fn covariance(&self) -> &Covariance {
+        &self.cov
+    }
+
     /// The discrepancy basis `L` and `B = A L` restricted to the support (`C N_u x K`,
     /// `N_o x K`).
     pub fn basis(&self) -> (&DMatrix<f64>, &DMatrix<f64>) {
