@@ -5,8 +5,10 @@
 //! drawing itself) and calibrates them with the drawing through `bamudi calibrate` (exact
 //! estimator, the CLI's default marginal mode) — exactly what a user runs. A run is a
 //! **silent miss** when the gap's 95 % interval misses the truth and the verdict says
-//! "adequate"; it found the **right cause** when the verdict is "inadequate" and names the
-//! faulty gauge as a sensor (sensor cells) or blames no sensor (as-built cells). Clean runs
+//! "adequate"; it found the **right cause** when the verdict is "inadequate" and, for sensor
+//! cells, attributes every failure to a sensor with the verdict's sensor correction (the
+//! faults still significant when fitted jointly) on the faulty gauge alone, or, for as-built
+//! cells, blames no sensor. Clean runs
 //! measure the false-alarm rate. Writes `adequacy.md` and, with `--json`, every run.
 
 use anyhow::{Context, Result, bail};
@@ -303,9 +305,9 @@ fn judge(c: &Cell, seed: u64, s: u8, truth: f64, r: &Value) -> Value {
     let inadequate = verdict == "inadequate";
     let right = inadequate
         && match (c.kind, c.gauge) {
-            ("sensor", Some(g)) => failed
-                .iter()
-                .all(|(gs, att, _)| att == "sensor" && (gs.is_empty() || gs == &[g.to_string()])),
+            ("sensor", Some(g)) => {
+                failed.iter().all(|(_, att, _)| att == "sensor") && corrected_gauges(ad) == [g]
+            }
             ("as_built", _) => failed.iter().all(|(_, att, _)| att != "sensor"),
             _ => false,
         };
@@ -315,6 +317,20 @@ fn judge(c: &Cell, seed: u64, s: u8, truth: f64, r: &Value) -> Value {
         "verdict": verdict, "right_cause": right, "silent_miss": !covered && verdict == "adequate",
         "failed": failed.iter().map(|(g, a, c)| json!({"check": c, "gauges": g, "attribution": a})).collect::<Vec<_>>(),
     })
+}
+
+/// The gauges of the verdict's sensor correction (the faults significant when fitted jointly).
+fn corrected_gauges(ad: &Value) -> Vec<String> {
+    let mut g: Vec<String> = ad["sensor_correction"]["faults"]
+        .as_array()
+        .map(|v| {
+            v.iter()
+                .filter_map(|f| f["gauge"].as_str().map(String::from))
+                .collect()
+        })
+        .unwrap_or_default();
+    g.dedup();
+    g
 }
 
 fn line(r: &Value) -> String {
@@ -356,8 +372,8 @@ fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
         "# The adequacy verdict on realities that differ from the model\n\n`cargo xtask adequacy --seeds {} --clean-seeds {} --scenarios {} --experiments {} --mesh {} --seed {}`: \
          each run simulates {} experiments with `bamudi simulate experiments --reality reality.toml` and calibrates them with the drawing \
          (`bamudi calibrate`, exact estimator, marginal mode, family-wise error 0.01). Silent miss: the gap's 95 % interval misses the \
-         truth and the verdict is \"adequate\". Right cause: \"inadequate\", naming only the faulty gauge as a sensor (sensor cells) or \
-         blaming no sensor (as-built cells).\n\n| reality | scenario | runs | interval covers θ* | inadequate | right cause | silent misses |\n|---|---|---|---|---|---|---|\n",
+         truth and the verdict is \"adequate\". Right cause: \"inadequate\", every failure attributed to a sensor and the sensor correction \
+         (the faults significant when fitted jointly) on the faulty gauge alone (sensor cells), or blaming no sensor (as-built cells).\n\n| reality | scenario | runs | interval covers θ* | inadequate | right cause | silent misses |\n|---|---|---|---|---|---|---|\n",
         a.seeds,
         a.clean_seeds,
         a.scenarios

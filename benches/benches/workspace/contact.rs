@@ -52,5 +52,32 @@ pub fn contact_benches(c: &mut Criterion) {
             }
         })
     });
+    theta_sweep_benches(&mut group, &model);
     group.finish();
+}
+
+/// A calibration's use of the model: one water level, the 241 gaps of a `θ` grid over
+/// 60-150 in, cold (the reference) and with anchored warm starts (`AnchorCache`, a fresh cache
+/// per sweep so that every anchor's cold solve is counted).
+fn theta_sweep_benches(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    model: &mitergate::ContactModel,
+) {
+    let thetas: Vec<f64> = (0..241).map(|k| 60.0 + 0.375 * k as f64).collect();
+    group.sample_size(10);
+    group.bench_function("theta_sweep_241_cold", |b| {
+        b.iter(|| {
+            for &t in &thetas {
+                black_box(model.solve(650.0, 100.0, t).unwrap());
+            }
+        })
+    });
+    group.bench_function("theta_sweep_241_anchored", |b| {
+        b.iter(|| {
+            let cache = mitergate::contact::AnchorCache::default();
+            for &t in &thetas {
+                black_box(cache.solve(model, 650.0, 100.0, t).unwrap());
+            }
+        })
+    });
 }

@@ -156,7 +156,7 @@ impl GateCalibrator {
             run = run.observer(o.as_ref());
         }
         let mut cal = run.run(self.model.as_ref(), &exps)?;
-        crate::physics::add_physics_checks(&mut cal, &self.model, &exps.x)?;
+        crate::physics::add_physics_checks(&mut cal, &self.model, &exps, &config)?;
         Ok(CalibratedGate {
             model: Arc::clone(&self.model),
             cal,

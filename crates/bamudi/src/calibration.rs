@@ -6,7 +6,7 @@
 //! data and the model, the results of both modules and the timings; Module 4 is its
 //! [`predictor`](Calibration::predictor).
 
-use crate::adequacy::{self, AdequacyReport, Check};
+use crate::adequacy::{self, AdequacyReport, Attribution, Check};
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
 use crate::module2::estimator::FittedEstimator;
@@ -337,11 +337,13 @@ impl Calibration {
         self.adequacy.as_ref()
     }
 
-    /// Adds an application's own checks (e.g. physical ones) to the verdict. Each check's
-    /// `passed` is taken as given (tolerance checks; they do not enter the p-value family);
-    /// a failed one makes the verdict inadequate and is listed, attributed to the model's
-    /// form. Nothing happens when the checks are disabled.
-    pub fn add_adequacy_checks(&mut self, checks: Vec<Check>) {
+    /// Adds an application's own checks (e.g. physical ones) to the verdict, each with the
+    /// attribution the application gives it should it fail (a physical check that passes once
+    /// the suspected sensor faults are removed, [`AdequacyReport::sensor_correction`], is a
+    /// sensor's doing; otherwise the model's form). Each check's `passed` is taken as given
+    /// (tolerance checks; they do not enter the p-value family); a failed one makes the
+    /// verdict inadequate and is listed. Nothing happens when the checks are disabled.
+    pub fn add_adequacy_checks(&mut self, checks: Vec<(Check, Attribution)>) {
         if let Some(a) = self.adequacy.as_mut() {
             a.add_tolerance_checks(checks);
         }

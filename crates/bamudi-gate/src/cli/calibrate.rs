@@ -140,7 +140,7 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
     );
     let bars = Bars::new();
     let mut cal = Calibrate::new(&config).observer(&bars).run(&model, &exps)?;
-    bamudi_gate::physics::add_physics_checks(&mut cal, &model, &exps.x)?;
+    bamudi_gate::physics::add_physics_checks(&mut cal, &model, &exps, &config)?;
     let warnings = posterior_warnings(&cal, saved.gap_prior);
     for w in &warnings {
         log::warn!("{w}");

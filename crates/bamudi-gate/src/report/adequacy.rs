@@ -39,6 +39,14 @@ pub fn section(a: &AdequacyReport) -> String {
         }
         s += "\n";
     }
+    if let Some(c) = &a.sensor_correction {
+        s += &format!(
+            "The failures are explained by sensor faults, fitted jointly with the calibration: \
+             {} (output units; gain per unit, drift per record length). Correct or exclude \
+             these gauges before trusting the gap.\n\n",
+            c.describe()
+        );
+    }
     if !a.gauges.is_empty() {
         s += &format!(
             "Each gauge predicted from the others (chi-square over the experiments; one family \

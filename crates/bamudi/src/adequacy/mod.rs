@@ -144,6 +144,53 @@ pub struct FailedCheck {
     pub detail: String,
 }
 
+/// The sensor faults that explain a verdict's failures, fitted jointly with the calibration
+/// (generalised least squares under the calibrated covariance), and what removing them does
+/// to the data. Present when the failures are attributed to sensors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensorCorrection {
+    /// The suspected faults with their joint estimates (`sd`, `z` and `p_value` are those of
+    /// the joint fit; the p-value is not multiplied by the step positions searched).
+    pub faults: Vec<SensorFault>,
+    /// The fitted faults at each experiment (rows) and output (columns), output units. Not
+    /// serialised: it is a function of the data and the faults.
+    #[serde(skip)]
+    pub shift: DMatrix<f64>,
+}
+
+impl SensorCorrection {
+    /// The observations with the fitted faults removed (`y − shift`), for a re-calibration
+    /// or a re-check on corrected data. `y` must be the calibration's own observations.
+    pub fn corrected(&self, y: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        if y.shape() != self.shift.shape() {
+            return Err(BamudiError::dim(
+                "observations vs the sensor correction (experiments x outputs)",
+                self.shift.nrows() * self.shift.ncols(),
+                y.nrows() * y.ncols(),
+            ));
+        }
+        Ok(y - &self.shift)
+    }
+
+    /// `"SG2 offset +9.8 (z 26.9)"`, comma separated.
+    pub fn describe(&self) -> String {
+        let items: Vec<String> = self
+            .faults
+            .iter()
+            .map(|f| {
+                format!(
+                    "{} {} {:+.3} (z {:.1})",
+                    f.gauge,
+                    f.kind.check_name().trim_start_matches("sensor_"),
+                    f.estimate,
+                    f.z
+                )
+            })
+            .collect();
+        items.join(", ")
+    }
+}
+
 /// One gauge predicted from the others.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GaugeCheck {
@@ -235,6 +282,9 @@ pub struct AdequacyReport {
     pub identifiability: Option<Identifiability>,
     /// The fitted discrepancy amplitude `s` (1: the prior scale the sampling rule implies).
     pub discrepancy_amplitude: Option<f64>,
+    /// The jointly fitted sensor faults, when the failures are attributed to sensors.
+    #[serde(default)]
+    pub sensor_correction: Option<SensorCorrection>,
 }
 
 impl AdequacyReport {
@@ -251,6 +301,7 @@ impl AdequacyReport {
             sensor_faults: Vec::new(),
             identifiability: None,
             discrepancy_amplitude: None,
+            sensor_correction: None,
         }
     }
 
@@ -260,13 +311,13 @@ impl AdequacyReport {
     }
 
     /// Adds tolerance checks (see [`Calibration::add_adequacy_checks`]).
-    pub fn add_tolerance_checks(&mut self, checks: Vec<Check>) {
-        for c in checks {
+    pub fn add_tolerance_checks(&mut self, checks: Vec<(Check, Attribution)>) {
+        for (c, attribution) in checks {
             if !c.passed {
                 self.failed.push(FailedCheck {
                     check: c.check.clone(),
                     gauges: c.gauge.iter().cloned().collect(),
-                    attribution: Attribution::ModelForm,
+                    attribution,
                     detail: c.detail.clone(),
                 });
                 if self.verdict == Verdict::Adequate {
@@ -331,7 +382,8 @@ where
     let faults = checks::sensor_faults(&rm, &lay)?;
     let mut all = family(&gauges, &condition, &faults);
     verdict::correct(&mut all, params.family_alpha);
-    let failed = verdict::attribute(&all, &faults, &rm, &lay, params.family_alpha)?;
+    let (failed, sensor_correction) =
+        verdict::attribute(&all, &faults, &rm, &lay, params.family_alpha)?;
     let identifiability = identifiability(cal, fit)?;
     Ok(AdequacyReport {
         verdict: verdict_of(&failed),
@@ -344,6 +396,7 @@ where
         sensor_faults: faults,
         identifiability: Some(identifiability),
         discrepancy_amplitude: Some(fit.amplitude),
+        sensor_correction,
     })
 }
 

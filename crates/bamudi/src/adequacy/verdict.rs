@@ -2,7 +2,7 @@
 //! of each failure to a sensor, to the model's form, or to nothing known.
 
 use super::residual::ResidualModel;
-use super::{Attribution, Check, FailedCheck, FaultKind, SensorFault, checks};
+use super::{Attribution, Check, FailedCheck, FaultKind, SensorCorrection, SensorFault, checks};
 use crate::error::Result;
 use nalgebra::DMatrix;
 
@@ -35,16 +35,17 @@ pub(crate) fn correct(checks: &mut [Check], alpha: f64) {
 /// and once those faults are fitted and removed (jointly, with the calibration) the other
 /// checks pass. Model form: one fault kind with one sign on three or more gauges, or gauges
 /// failing their leave-one-out prediction on three or more gauges. Otherwise unexplained.
+/// With a sensor attribution comes the joint fit of the suspected faults.
 pub(crate) fn attribute(
     checks: &[Check],
     faults: &[SensorFault],
     rm: &ResidualModel,
     lay: &checks::Layout,
     alpha: f64,
-) -> Result<Vec<FailedCheck>> {
+) -> Result<(Vec<FailedCheck>, Option<SensorCorrection>)> {
     let failed: Vec<&Check> = checks.iter().filter(|c| !c.passed).collect();
     if failed.is_empty() {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), None));
     }
     let suspects = significant_faults(checks, faults);
     let gauges = distinct(suspects.iter().map(|f| f.gauge.clone()));
@@ -55,25 +56,42 @@ pub(crate) fn attribute(
             .filter(|c| c.check == "logo")
             .filter_map(|c| c.gauge.clone()),
     );
-    let sensor_explains = (1..=2).contains(&gauges.len())
-        && common.is_none()
-        && remaining_after_removal(&suspects, rm, lay, checks.len(), alpha)? == 0;
-    let attribution = if sensor_explains {
+    let correction = if (1..=2).contains(&gauges.len()) && common.is_none() {
+        let (correction, remaining) = joint_correction(&suspects, rm, lay, checks.len(), alpha)?;
+        (remaining == 0).then_some(correction)
+    } else {
+        None
+    };
+    let accused = |g: &String| {
+        correction
+            .as_ref()
+            .is_none_or(|c| c.faults.iter().any(|f| &f.gauge == g))
+    };
+    let attribution = if correction.is_some() {
         Attribution::Sensor
     } else if common.is_some() || logo_gauges.len() >= 3 {
         Attribution::ModelForm
     } else {
         Attribution::Unexplained
     };
-    Ok(failed
+    let failed = failed
         .into_iter()
         .map(|c| FailedCheck {
             check: c.check.clone(),
             gauges: c.gauge.iter().cloned().collect(),
             attribution,
-            detail: c.detail.clone(),
+            detail: match (&c.gauge, &correction) {
+                (Some(g), Some(corr)) if !accused(g) => format!(
+                    "{}; not significant once {} is fitted jointly: a spill-over of that \
+                     fault through the discrepancy, not this gauge's",
+                    c.detail,
+                    corr.describe()
+                ),
+                _ => c.detail.clone(),
+            },
         })
-        .collect())
+        .collect();
+    Ok((failed, correction))
 }
 
 fn distinct(it: impl Iterator<Item = String>) -> Vec<String> {
@@ -121,15 +139,40 @@ fn common_kind(suspects: &[&SensorFault]) -> Option<FaultKind> {
     })
 }
 
-/// How many of the prediction checks (each gauge, the worst condition) still reject, at the
-/// family's Bonferroni level, once the suspected faults are fitted jointly and removed.
+/// The suspected faults fitted jointly; a suspect not significant in the joint fit (at the
+/// family's Bonferroni level) is exonerated — its own test rejected only because the
+/// discrepancy spread another gauge's fault to it — and the rest are fitted again without
+/// it. Returns the correction and how many prediction checks still reject after it.
+fn joint_correction(
+    suspects: &[&SensorFault],
+    rm: &ResidualModel,
+    lay: &checks::Layout,
+    family_size: usize,
+    alpha: f64,
+) -> Result<(SensorCorrection, usize)> {
+    let (all, remaining) = remaining_after_removal(suspects, rm, lay, family_size, alpha)?;
+    let level = alpha / family_size as f64;
+    let kept: Vec<&SensorFault> = suspects
+        .iter()
+        .zip(&all.faults)
+        .filter(|(_, joint)| joint.p_value < level)
+        .map(|(s, _)| *s)
+        .collect();
+    if kept.is_empty() || kept.len() == suspects.len() {
+        return Ok((all, remaining));
+    }
+    remaining_after_removal(&kept, rm, lay, family_size, alpha)
+}
+
+/// The suspected faults fitted jointly, and how many of the prediction checks (each gauge,
+/// the worst condition) still reject, at the family's Bonferroni level, once they are removed.
 fn remaining_after_removal(
     suspects: &[&SensorFault],
     rm: &ResidualModel,
     lay: &checks::Layout,
     family_size: usize,
     alpha: f64,
-) -> Result<usize> {
+) -> Result<(SensorCorrection, usize)> {
     let cols: Vec<DMatrix<f64>> = suspects
         .iter()
         .map(|f| {
@@ -143,8 +186,9 @@ fn remaining_after_removal(
             .map(|c| c.column(0).into_owned())
             .collect::<Vec<_>>(),
     );
-    let (beta, _) = rm.gls(&h, "the suspected sensor faults fitted jointly")?;
+    let (beta, cov) = rm.gls(&h, "the suspected sensor faults fitted jointly")?;
     let cleaned = rm.with_removed(&h, &beta);
+    let correction = correction(suspects, lay, &h, &beta, &cov);
     let level = alpha / family_size as f64;
     let logo = checks::leave_one_gauge_out(&cleaned, lay)?;
     let mut n = logo
@@ -155,7 +199,38 @@ fn remaining_after_removal(
     if checks::worst_condition(&cleaned, lay, &x)?.p_value < level {
         n += 1;
     }
-    Ok(n)
+    Ok((correction, n))
+}
+
+/// The joint estimates as faults, and their signatures times the estimates as an
+/// experiments x outputs matrix (the stacking is experiment-major).
+fn correction(
+    suspects: &[&SensorFault],
+    lay: &checks::Layout,
+    h: &DMatrix<f64>,
+    beta: &nalgebra::DVector<f64>,
+    cov: &DMatrix<f64>,
+) -> SensorCorrection {
+    let stacked = h * beta;
+    let faults = suspects
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let sd = cov[(k, k)].max(0.0).sqrt();
+            let z = beta[k] / sd;
+            SensorFault {
+                estimate: beta[k],
+                sd,
+                z,
+                p_value: checks::normal_two_sided(z),
+                ..(*f).clone()
+            }
+        })
+        .collect();
+    SensorCorrection {
+        faults,
+        shift: DMatrix::from_fn(lay.n_e, lay.n_o, |i, g| stacked[i * lay.n_o + g]),
+    }
 }
 
 #[cfg(test)]

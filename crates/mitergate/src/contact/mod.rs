@@ -113,7 +113,9 @@
 //! The model (parameters, set-up, forces API) is in `contact/model.rs`, the iteration above in
 //! `contact/solver.rs`.
 
+mod anchored;
 mod model;
 mod solver;
 
+pub use anchored::{ANCHOR_SPACING_IN, AnchorCache, anchor_gap};
 pub use model::{ContactModel, ContactParams, ContactSolution};
