@@ -32,9 +32,11 @@ pub(crate) fn correct(checks: &mut [Check], alpha: f64) {
 }
 
 /// The failed checks, each attributed. Sensor: the fault tests reject on one or two gauges,
-/// and once those faults are fitted and removed (jointly, with the calibration) the other
-/// checks pass. Model form: one fault kind with one sign on three or more gauges, or gauges
-/// failing their leave-one-out prediction on three or more gauges. Otherwise unexplained.
+/// and once those faults — every rejected kind on those gauges, since a real gauge can drift
+/// from an offset start (a linear drift from zero is an offset plus a centred drift) — are
+/// fitted and removed (jointly, with the calibration) the other checks pass. Model form: one
+/// fault kind with one sign on three or more gauges, or gauges failing their leave-one-out
+/// prediction on three or more gauges. Otherwise unexplained.
 /// With a sensor attribution comes the joint fit of the suspected faults.
 pub(crate) fn attribute(
     checks: &[Check],
@@ -57,7 +59,14 @@ pub(crate) fn attribute(
             .filter_map(|c| c.gauge.clone()),
     );
     let correction = if (1..=2).contains(&gauges.len()) && common.is_none() {
-        let (correction, remaining) = joint_correction(&suspects, rm, lay, checks.len(), alpha)?;
+        let every = rejected_faults(checks, faults);
+        let (correction, remaining) = joint_correction(&every, rm, lay, checks.len(), alpha)
+            .or_else(|e| {
+                // several kinds on one gauge can be collinear (an offset and a gain where the
+                // fitted mean barely varies): then the most significant kind per gauge
+                log::debug!("joint fit of every rejected fault failed ({e}); best per gauge");
+                joint_correction(&suspects, rm, lay, checks.len(), alpha)
+            })?;
         (remaining == 0).then_some(correction)
     } else {
         None
@@ -101,15 +110,20 @@ fn distinct(it: impl Iterator<Item = String>) -> Vec<String> {
     v
 }
 
-/// The most significant rejected fault of each gauge.
-fn significant_faults<'a>(checks: &[Check], faults: &'a [SensorFault]) -> Vec<&'a SensorFault> {
+/// Every fault whose test rejected.
+fn rejected_faults<'a>(checks: &[Check], faults: &'a [SensorFault]) -> Vec<&'a SensorFault> {
     let rejected = |f: &SensorFault| {
         checks.iter().any(|c| {
             !c.passed && c.check == f.kind.check_name() && c.gauge.as_deref() == Some(&f.gauge)
         })
     };
+    faults.iter().filter(|f| rejected(f)).collect()
+}
+
+/// The most significant rejected fault of each gauge.
+fn significant_faults<'a>(checks: &[Check], faults: &'a [SensorFault]) -> Vec<&'a SensorFault> {
     let mut best: Vec<&SensorFault> = Vec::new();
-    for f in faults.iter().filter(|f| rejected(f)) {
+    for f in rejected_faults(checks, faults) {
         match best.iter_mut().find(|b| b.gauge == f.gauge) {
             Some(b) if f.z.abs() > b.z.abs() => *b = f,
             Some(_) => {}
