@@ -161,6 +161,16 @@ pub struct SensorCorrection {
 impl SensorCorrection {
     /// The observations with the fitted faults removed (`y − shift`), for a re-calibration
     /// or a re-check on corrected data. `y` must be the calibration's own observations.
+    ///
+    /// ```
+    /// use bamudi::adequacy::SensorCorrection;
+    /// use nalgebra::DMatrix;
+    /// // a +2 microstrain offset fitted on the second of two gauges, three experiments
+    /// let c = SensorCorrection { faults: vec![], shift: DMatrix::from_fn(3, 2, |_, g| 2.0 * g as f64) };
+    /// let y = DMatrix::from_element(3, 2, 10.0);
+    /// assert_eq!(c.corrected(&y).unwrap()[(0, 1)], 8.0);
+    /// assert!(c.corrected(&DMatrix::zeros(4, 2)).is_err()); // not this calibration's data
+    /// ```
     pub fn corrected(&self, y: &DMatrix<f64>) -> Result<DMatrix<f64>> {
         if y.shape() != self.shift.shape() {
             return Err(BamudiError::dim(

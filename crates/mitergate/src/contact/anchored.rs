@@ -31,6 +31,17 @@ pub const ANCHOR_SPACING_IN: f64 = 5.0;
 const ANCHOR_CACHE_BYTES: usize = 64 << 20;
 
 /// Cold solutions at anchor gaps, keyed by the exact bits of `(h_up, h_down, θ_anchor)`.
+///
+/// ```
+/// use mitergate::contact::{AnchorCache, ContactParams};
+/// let model = ContactParams::default().build(mitergate::testing::doc_gate()).unwrap();
+/// let cache = AnchorCache::default();
+/// let warm = cache.solve(&model, 700.0, 50.0, 101.3).unwrap(); // starts from θ = 100
+/// let cold = model.solve(700.0, 50.0, 101.3).unwrap();
+/// let peak = cold.forces.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+/// assert!(warm.forces.iter().zip(&cold.forces).all(|(w, c)| (w - c).abs() <= 1e-6 * peak));
+/// assert_eq!(cache.len(), 1); // the anchor at 100 in is kept for the next gap near it
+/// ```
 #[derive(Debug, Default)]
 pub struct AnchorCache {
     anchors: RwLock<HashMap<[u64; 3], Arc<ContactSolution>>>,
