@@ -74,8 +74,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .map(|e| format!("{} ({})", e.name, e.covariates.join(", ")))
             .collect();
+        let track = r.theta_track.as_ref().map_or("-".into(), |t| {
+            let alarm = t
+                .alarm
+                .as_ref()
+                .map_or("no alarm".into(), |a| format!("alarm day {:.1}", a.day));
+            format!("{:.1} ± {:.1}; {alarm}", t.now.mean, t.now.sd)
+        });
+        let scan = r.events.as_ref().map_or(0, |e| e.alarms.len());
         rows.push(format!(
-            "| {label} | {} | {:.2} -> {:.2} | {:.1} ± {:.1} -> {:.1} ± {:.1} ({}) | {} |",
+            "| {label} | {} | {:.2} -> {:.2} | {:.1} ± {:.1} -> {:.1} ± {:.1} ({}) | {track} | {scan} | {:.0} | {} |",
             if effects.is_empty() {
                 "none".to_string()
             } else {
@@ -92,13 +100,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             } else {
                 "90"
             },
+            t.elapsed().as_secs_f64(),
             r.conclusion
         ));
     }
     println!(
-        "| simulated effect | effects found (covariates) | held-out RMSE before -> after (microstrain) | gap before -> after (in, truth) | conclusion |"
+        "| simulated effect | effects found (covariates) | held-out RMSE before -> after (microstrain) | gap before -> after (in, truth) | gap now from the track (in); change alarm | scan alarms | wall time (s) | conclusion |"
     );
-    println!("|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|");
     for r in rows {
         println!("{r}");
     }

@@ -38,7 +38,11 @@ pub(crate) fn cholesky_with_jitter(
                 expected,
                 found: got,
             },
-            // (the Cholesky kernel never iterates; mapped for completeness)
+            // (the Cholesky kernel never iterates nor refuses arguments; mapped for completeness)
+            NumericsError::Invalid { what, reason } => GpError::OptimizationFailed {
+                starts: 0,
+                last: format!("{what}: {reason}"),
+            },
             NumericsError::NoConvergence { what } => GpError::OptimizationFailed {
                 starts: 0,
                 last: format!("{what}: did not converge"),

@@ -40,4 +40,12 @@ pub enum NumericsError {
         /// What was computed.
         what: String,
     },
+    /// An argument outside its domain.
+    #[error("{what}: {reason}")]
+    Invalid {
+        /// Which argument.
+        what: String,
+        /// Why it is refused.
+        reason: String,
+    },
 }

@@ -6,6 +6,7 @@
 //! | [`standardize`] | per-column affine standardisation `z = (v − mean) / sd` | `seqnet` (LSTM inputs and outputs), `bamudi` (ridge estimator, close-loop features) |
 //! | [`random`] | seeded standard-normal draws (Box-Muller) and per-index seed derivation | `mlmodel` (prior draws), `bamudi` (training sets, MCMC) |
 //! | [`robust`] | median and the first-difference noise scale | `bamudi` (gauge-noise estimate, close-loop checks) |
+//! | [`changepoint`] | changes in the mean of a serially correlated series: PELT with the modified BIC, location intervals (Bai 1997) and sizes | `bamudi` (the close loop's whole-record event scan) |
 //! | [`rainflow`] | online rainflow cycle counting (ASTM E1049) | `bamudi-gate` (quoin-block fatigue over a record) |
 //!
 //! Distributions (normal, chi-square, Student t, binomial) come from `statrs`, not from here.
@@ -20,6 +21,7 @@
 #[cfg(doctest)]
 pub struct ReadmeDoctest;
 
+pub mod changepoint;
 pub mod cholesky;
 pub mod eigen;
 mod error;

@@ -41,6 +41,8 @@ pub fn markdown(r: &CloseLoopReport) -> String {
     }
     s.push('\n');
     rmse_table(&mut s, r);
+    alarms_section(&mut s, r);
+    track_section(&mut s, r);
     effects_section(&mut s, r);
     steps_section(&mut s, r);
     checks_section(&mut s, r);
@@ -78,6 +80,113 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
         t(&r.theta_after),
         r.theta_after_basis
     );
+}
+
+/// The whole-record event scan: every change of level left in a gauge's residual.
+fn alarms_section(s: &mut String, r: &CloseLoopReport) {
+    let Some(scan) = &r.events else {
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "## Alarms
+
+{}.
+",
+        scan.method
+    );
+    if scan.alarms.is_empty() {
+        let _ = writeln!(
+            s,
+            "No change of level in any gauge's residual (levels held at least {} rows; intervals at {}).\n",
+            scan.config.min_segment_rows, scan.config.level
+        );
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "| gauge | onset (day) | onset interval (day) | time (UTC) | CSV line | size (microstrain) | window | with | reading |\n|---|---|---|---|---|---|---|---|---|"
+    );
+    for a in &scan.alarms {
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.2} – {:.2} | {} | {} | {:+.2} ± {:.2} | {:?} | {} | {} |",
+            a.gauge,
+            a.onset_day,
+            a.onset_day_interval.0,
+            a.onset_day_interval.1,
+            a.onset_time.as_deref().unwrap_or("-"),
+            a.onset_csv_line,
+            a.size,
+            0.5 * (a.size_interval.1 - a.size_interval.0),
+            a.window,
+            a.coincident_gauges.join(", "),
+            a.reading
+        );
+    }
+    s.push('\n');
+}
+
+/// The gap tracked through the record: now, the change alarm, and a weekly table.
+fn track_section(s: &mut String, r: &CloseLoopReport) {
+    let Some(t) = &r.theta_track else {
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "## Gap through the record\n\nGap now (filter at the last {:.0} h window): **{:.2} ± {:.2} in** (95 %: {:.2} – {:.2}); level random walk {:.3} in/√day, slope random walk {:.4} in/day/√day (constant gap against a random walk: p = {:.3}); window sds × {:.2} for over-dispersion; residual noise {:.3} microstrain. Plot: `theta_track.svg`.\n",
+        t.config.window_hours,
+        t.now.mean,
+        t.now.sd,
+        t.now.ci95.0,
+        t.now.ci95.1,
+        t.level_sd_per_day,
+        t.slope_sd_per_day,
+        t.constant_p_value,
+        t.overdispersion,
+        t.noise_sd
+    );
+    match &t.alarm {
+        Some(a) => {
+            let _ = writeln!(
+                s,
+                "**Change alarm:** the gap's {} was detected on day {:.2}; estimated onset day {:.2} (delay {:.2} days; CUSUM threshold {:.2} sd, one false alarm per {:.0} windows in control).\n",
+                a.direction,
+                a.day,
+                a.onset_day,
+                a.delay_days,
+                t.cusum_h,
+                t.config.in_control_windows
+            );
+        }
+        None => {
+            let _ = writeln!(
+                s,
+                "No change alarm (CUSUM threshold {:.2} sd, one false alarm per {:.0} windows in control).\n",
+                t.cusum_h, t.config.in_control_windows
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "| day | window estimate (in) | smoothed (in) | 95 % band (in) |\n|---|---|---|---|"
+    );
+    let mut next = 0.0;
+    for p in &t.points {
+        if p.day + 1e-9 < next {
+            continue;
+        }
+        next = p.day + 7.0;
+        let est = p
+            .estimate
+            .map_or("-".into(), |(m, sd)| format!("{m:.2} ± {sd:.2}"));
+        let _ = writeln!(
+            s,
+            "| {:.1} | {est} | {:.2} ± {:.2} | {:.2} – {:.2} |",
+            p.day, p.smoothed.0, p.smoothed.1, p.band95.0, p.band95.1
+        );
+    }
+    s.push('\n');
 }
 
 /// One section per accepted effect with its parameters.
@@ -191,6 +300,11 @@ pub fn write_report(
     let p = dir.join("theta.svg");
     plot_theta(&out.report, &p)?;
     files.push(p);
+    if let Some(t) = &out.report.theta_track {
+        let p = dir.join("theta_track.svg");
+        plot_track(t, &p)?;
+        files.push(p);
+    }
     let mut seen = vec![];
     for cov in &out.effect_plot_covariates {
         if seen.contains(cov) {
@@ -333,6 +447,30 @@ fn plot_rmse(r: &CloseLoopReport, path: &Path) -> Result<()> {
         )?;
         Ok(())
     })
+}
+
+/// The gap through the record: window estimates, the smoothed track and its 95 % band.
+fn plot_track(t: &bamudi::closeloop::ThetaTrack, path: &Path) -> Result<()> {
+    let pts = |f: &dyn Fn(&bamudi::closeloop::TrackPoint) -> f64| {
+        t.points.iter().map(|p| (p.day, f(p))).collect::<Vec<_>>()
+    };
+    let estimates: Vec<(f64, f64)> = t
+        .points
+        .iter()
+        .filter_map(|p| p.estimate.map(|(m, _)| (p.day, m)))
+        .collect();
+    let mut upper = Series::new("95 % band", BAND, pts(&|p| p.band95.1));
+    upper.dashed = true;
+    let mut lower = Series::new("", BAND, pts(&|p| p.band95.0));
+    lower.dashed = true;
+    let series = [
+        Series::scatter("window estimate", BEFORE, estimates),
+        Series::new("smoothed gap", AFTER, pts(&|p| p.smoothed.0)),
+        upper,
+        lower,
+    ];
+    let axes = Axes::new("Gap θ through the record", "time (days)", "gap θ (in)");
+    line_plot(path, &axes, &series)
 }
 
 /// The gap before and after the loop: mean and 95 % interval, one column each.

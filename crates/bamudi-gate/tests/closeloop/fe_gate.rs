@@ -7,6 +7,7 @@ use super::*;
 use bamudi::closeloop::EffectReport;
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
+use mitergate::data::field::OffsetJump;
 use mitergate::{ContactModel, GateConfig};
 use std::sync::OnceLock;
 
@@ -25,8 +26,13 @@ fn contact() -> &'static ContactModel {
 
 /// Simulates a record with the FE gate as the truth and runs the loop on its CSV text.
 fn run_fe(preset: &str, seed: u64) -> CloseLoopOutcome {
-    let c = contact();
     let fx = FieldEffects::default().with_preset(preset, 130.0).unwrap();
+    run_fe_with(preset, fx, seed)
+}
+
+/// As [`run_fe`], with the simulator's effects given.
+fn run_fe_with(preset: &str, fx: FieldEffects, seed: u64) -> CloseLoopOutcome {
+    let c = contact();
     let rec = gate::simulate_field(&FieldConfig::default().seed(seed).effects(fx), c).unwrap();
     let calibrator = GateCalibrator::new(c.clone(), (60.0, 150.0)).unwrap();
     let data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
@@ -44,6 +50,15 @@ fn run_fe(preset: &str, seed: u64) -> CloseLoopOutcome {
         r.theta_after.mean,
         r.theta_after.sd,
     );
+    if let (Some(t), Some(e)) = (&r.theta_track, &r.events) {
+        eprintln!(
+            "FE {preset} (seed {seed}): gap now from the track {:.3} ± {:.3}, change alarm {:?}; scan alarms {}",
+            t.now.mean,
+            t.now.sd,
+            t.alarm,
+            e.alarms.len()
+        );
+    }
     out
 }
 
@@ -90,6 +105,49 @@ fn fe_gate_clean_record_gets_no_effect_and_the_true_gap() {
     // 0.5 in: ten posterior sds (0.03-0.05 in measured), a tenth of the +5 in bias the paper's
     // prior-marginal coefficients gave on this gate
     assert!((r.theta_after.mean - TRUE_GAP).abs() < 0.5);
+}
+
+/// An event in the newest data, after the calibration window (the first 60 % of 60 days):
+/// gauge 6 re-zeroed by −6 microstrain 2.7 days before the end. The loop cannot fit it; the
+/// whole-record scan must raise it on that gauge only, its 95 % onset interval must hold the
+/// hour of the step and its 95 % size interval −6, and the conclusion must name the gauge.
+#[test]
+fn fe_gate_an_event_in_the_last_days_is_an_alarm() {
+    let (gauge, at_day, size) = (5, 57.3, -6.0);
+    let fx = FieldEffects {
+        offset_jump: Some(OffsetJump {
+            gauge,
+            at_day,
+            size_microstrain: size,
+        }),
+        ..Default::default()
+    };
+    let out = run_fe_with("late re-zero", fx, SEED);
+    let r = &out.report;
+    let name = &r.gauge_names[gauge];
+    let alarms = &r.events.as_ref().expect("the scan runs by default").alarms;
+    eprintln!("late re-zero alarms: {alarms:?}");
+    assert!(alarms.iter().all(|a| &a.gauge == name), "{alarms:?}");
+    // the step falls between the hourly rows at 1375 h and 1376 h
+    let (before, after) = (
+        (at_day * 24.0_f64).floor() / 24.0,
+        (at_day * 24.0_f64).ceil() / 24.0,
+    );
+    let a = alarms
+        .iter()
+        .find(|a| a.onset_day_interval.0 <= after && before <= a.onset_day_interval.1)
+        .unwrap_or_else(|| panic!("no alarm dated at day {at_day}: {alarms:?}"));
+    assert!(
+        a.size_interval.0 <= size && size <= a.size_interval.1,
+        "{a:?}"
+    );
+    assert_eq!(a.window, bamudi::closeloop::AlarmWindow::Heldout);
+    assert!(
+        !r.conclusion.starts_with("no missing effect"),
+        "{}",
+        r.conclusion
+    );
+    assert!(r.conclusion.contains(name.as_str()), "{}", r.conclusion);
 }
 
 #[test]

@@ -2,8 +2,10 @@
 //! simulator switched on (it is never told which), bring the held-out RMSE near the noise
 //! level, move the gap estimate toward the truth, and add nothing to a clean record.
 
+mod events;
 mod fe_gate;
 mod scenarios;
+mod track;
 
 use bamudi::closeloop::testing::{GridCalibrator, ToyGate, toy_load};
 use bamudi::closeloop::{CloseLoopConfig, CloseLoopOutcome, IngestConfig, close_loop, parse_csv};

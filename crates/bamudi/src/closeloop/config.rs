@@ -95,8 +95,6 @@ pub struct CloseLoopConfig {
     pub parameter_name: String,
     /// Unit of the outputs, in effect parameter reports [`output units`].
     pub output_unit: String,
-    /// Segments of the calibration window for the time-varying gap [6].
-    pub gap_segments: usize,
     /// Maximum number of covariates in the generic term [3].
     pub max_generic_features: usize,
     /// How the generic term selects its covariates [stepwise BIC].
@@ -109,6 +107,10 @@ pub struct CloseLoopConfig {
     /// Candidates re-calibrated at each step to decide between them [3]; at least 2 are
     /// (the best library effect and the best generic term) when both pass the screening.
     pub confirm_candidates: usize,
+    /// The whole-record event scan of the final residual [enabled, PELT with the modified BIC].
+    pub event_scan: super::EventScanConfig,
+    /// The parameter tracked through the record [enabled, daily windows].
+    pub track: super::TrackConfig,
 }
 
 impl Default for CloseLoopConfig {
@@ -121,12 +123,13 @@ impl Default for CloseLoopConfig {
             load: None,
             parameter_name: "parameter".into(),
             output_unit: "output units".into(),
-            gap_segments: 6,
             max_generic_features: 3,
             generic_selection: super::effects::Selection::StepwiseBic,
             ljung_box_lags: 10,
             significance: 0.01,
             confirm_candidates: 3,
+            event_scan: super::EventScanConfig::default(),
+            track: super::TrackConfig::default(),
         }
     }
 }
@@ -229,6 +232,7 @@ impl CloseLoopConfig {
         if let Some(l) = &self.load {
             l.validate()?;
         }
-        Ok(())
+        self.event_scan.validate()?;
+        self.track.validate()
     }
 }

@@ -23,7 +23,11 @@
 //!    the model, re-calibrates and back-fits, and accepts the best only if it then lowers the
 //!    held-out mean square error by more than [`CloseLoopConfig::min_relative_improvement`]
 //!    (the data-driven term must beat the best physical effect by that margin too); repeats
-//!    until the residuals pass the checks or nothing improves.
+//!    until the residuals pass the checks or nothing improves;
+//! 5. scans every gauge's final residual over the whole record, the newest data included, for
+//!    changes of level ([`EventScan`]: alarms dated and sized with intervals), and tracks `θ`
+//!    through the record ([`ThetaTrack`]: window estimates, a local linear trend with 95 %
+//!    bands, `θ` now, a change alarm with its delay).
 //!
 //! The loop is never told which effect is present; with no effect it reports "no missing
 //! effect found". The application renders the [`CloseLoopOutcome`] (the gate's `report.md`,
@@ -40,6 +44,7 @@
 mod config;
 mod effect;
 pub mod effects;
+mod events;
 mod features;
 mod nuisance;
 mod record;
@@ -47,6 +52,7 @@ mod search;
 pub(crate) mod stats;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
+pub(crate) mod track;
 
 pub use crate::module3::posterior::ThetaSummary;
 pub use config::{CloseLoopConfig, LoadSpec};
@@ -55,9 +61,11 @@ pub use effect::{
     param,
 };
 pub use effects::LinearTerm;
+pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
 pub use features::Features;
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, parse_csv, read_csv};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
+pub use track::{ThetaTrack, TrackAlarm, TrackConfig, TrackPoint, TrackState};
 
 use crate::error::{BamudiError, Result};
 use nalgebra::DMatrix;
@@ -204,6 +212,12 @@ pub struct CloseLoopReport {
     /// The final calibration's adequacy verdict.
     #[serde(default)]
     pub model_adequacy_after: Option<crate::adequacy::AdequacyReport>,
+    /// Changes of level in the final residual over the whole record (`None` when disabled).
+    #[serde(default)]
+    pub events: Option<EventScan>,
+    /// The parameter tracked through the record (`None` when disabled).
+    #[serde(default)]
+    pub theta_track: Option<ThetaTrack>,
 }
 
 /// Result of [`close_loop`]: the report plus the residual series used for the plots.
@@ -434,6 +448,84 @@ fn stop_conclusion(st: &State, decision: &str, checks: &[Adequacy]) -> String {
     )
 }
 
+/// The conclusion with the alarms: "no missing effect found" is never said while the
+/// whole-record scan finds a change of level in a residual or the parameter's track raises
+/// its change alarm.
+fn with_alarms(
+    conclusion: String,
+    scan: Option<&EventScan>,
+    track: Option<&ThetaTrack>,
+    unit: &str,
+) -> String {
+    let mut found = vec![];
+    if let Some(scan) = scan.filter(|s| !s.alarms.is_empty()) {
+        let n = scan.alarms.len();
+        found.push(format!(
+            "the whole-record scan finds {n} change(s) of level in the residual: {}{}",
+            scan.headline(3, unit).join("; "),
+            if n > 3 { "; ..." } else { "" }
+        ));
+    }
+    if let Some(a) = track.and_then(|t| t.alarm.as_ref()) {
+        found.push(format!(
+            "the parameter's track raises a change alarm: {} detected on day {:.2}, onset about day {:.2}",
+            a.direction, a.day, a.onset_day
+        ));
+    }
+    if found.is_empty() {
+        return conclusion;
+    }
+    let found = found.join("; ");
+    match conclusion.strip_prefix("no missing effect found: ") {
+        Some(rest) => format!("{rest}, but {found}"),
+        None => format!("{conclusion}; {found}"),
+    }
+}
+
+/// The whole-record analyses of the final state: the event scan and the parameter's track
+/// (each `None` when disabled).
+fn whole_record(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    st: &State,
+    r_final: &DMatrix<f64>,
+    n_cal: usize,
+) -> Result<(Option<EventScan>, Option<ThetaTrack>)> {
+    let events = match lp.cfg.event_scan.enabled {
+        true => Some(events::scan(rec, r_final, n_cal, &lp.cfg.event_scan)?),
+        false => None,
+    };
+    let track = match lp.cfg.track.enabled {
+        true => Some(track_theta(lp, rec, st, r_final)?),
+        false => None,
+    };
+    Ok((events, track))
+}
+
+/// The parameter tracked over the record with the final model, on the data minus the
+/// accepted additive effects (a parameter trend is what the track replaces, so it is left in).
+fn track_theta(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    st: &State,
+    r_final: &DMatrix<f64>,
+) -> Result<ThetaTrack> {
+    let mut target = lp.y.clone();
+    for (e, c) in st.effects.iter().zip(lp.contributions(st)?) {
+        if !e.effect.keeps_model_fixed() {
+            target -= c;
+        }
+    }
+    let input = track::TrackInput {
+        model: st.model.as_ref(),
+        x: lp.x,
+        target: &target,
+        time_h: &rec.time_h,
+        noise_sd: stats::median_noise_sd(r_final),
+    };
+    track::track(&input, &lp.cfg.track)
+}
+
 /// Assembles the outcome of a finished run.
 fn outcome(
     lp: &Loop<'_>,
@@ -449,7 +541,20 @@ fn outcome(
     } = run;
     let r_final = lp.residual(&st)?;
     let checks_after = windows(lp, &r_final, &st.var).to_vec();
-    let (theta_after, basis) = search::theta_now(&st);
+    let (events, theta_track) = whole_record(lp, rec, &st, &r_final, n_cal)?;
+    let (theta_after, basis) = match &theta_track {
+        Some(t) if st.model_fixed() => (
+            t.now,
+            "the parameter at the end of the record from its track over the whole record (Kalman filter at the last window)".to_string(),
+        ),
+        _ => search::theta_now(&st),
+    };
+    let conclusion = with_alarms(
+        conclusion,
+        events.as_ref(),
+        theta_track.as_ref(),
+        &lp.cfg.output_unit,
+    );
     let rmse_after = rmse_per_column(&r_final, lp.ho);
     let total = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let report = CloseLoopReport {
@@ -476,6 +581,8 @@ fn outcome(
         conclusion,
         model_adequacy_before: before.adequacy,
         model_adequacy_after: st.model.adequacy().cloned(),
+        events,
+        theta_track,
     };
     Ok(CloseLoopOutcome {
         report,

@@ -24,7 +24,7 @@ pub(super) struct State {
 
 impl State {
     /// Whether an accepted effect keeps the model fixed (a parameter trend).
-    fn model_fixed(&self) -> bool {
+    pub(super) fn model_fixed(&self) -> bool {
         self.effects.iter().any(|e| e.effect.keeps_model_fixed())
     }
 }
@@ -279,7 +279,7 @@ impl Loop<'_> {
     }
 
     /// Each accepted effect's contribution at every row (microstrain).
-    fn contributions(&self, st: &State) -> Result<Vec<DMatrix<f64>>> {
+    pub(super) fn contributions(&self, st: &State) -> Result<Vec<DMatrix<f64>>> {
         let ctx = self.context(st);
         st.effects
             .iter()

@@ -288,6 +288,18 @@ pub(crate) fn normal_quantile_upper(p: f64) -> f64 {
     std::f64::consts::SQRT_2 * statrs::function::erf::erfc_inv(2.0 * p.clamp(1e-300, 0.5))
 }
 
+/// Median over the columns of `r` of the robust white-noise sd from first differences
+/// ([`numerics::robust::noise_sd_from_differences`]; output units).
+pub(crate) fn median_noise_sd(r: &DMatrix<f64>) -> f64 {
+    let mut noise: Vec<f64> = (0..r.ncols())
+        .map(|j| {
+            let col: Vec<f64> = r.column(j).iter().copied().collect();
+            numerics::robust::noise_sd_from_differences(&col)
+        })
+        .collect();
+    numerics::robust::median(&mut noise)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

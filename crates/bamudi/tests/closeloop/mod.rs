@@ -45,6 +45,68 @@ fn noise_alone_adds_no_effect() {
             "{}",
             out.report.conclusion
         );
+        let scan = out
+            .report
+            .events
+            .as_ref()
+            .expect("the scan runs by default");
+        assert!(scan.alarms.is_empty(), "seed {seed}: {:?}", scan.alarms);
+    }
+}
+
+/// Events the loop cannot fit because they start after its calibration window (the newest
+/// data an operator cares about), in shapes and sizes outside the effect library's forms: a
+/// re-zero in the last 30 hours, a smaller step at 90 % of the record, and a debond that creeps
+/// over a day to a plateau (its onset is the start of the creep). The scan must name the right
+/// gauge, put the true onset (for the creep: some hour of it) inside its 95 % interval, hold the
+/// plateau inside the 95 % size interval, and raise nothing on the six untouched gauges.
+#[test]
+fn events_in_the_newest_data_are_found_dated_and_sized() {
+    /// Name, gauge, seed, onset hours (start, end of the build-up), plateau, shape.
+    type Case = (&'static str, usize, u64, (f64, f64), f64, fn(f64) -> f64);
+    let cases: [Case; 3] = [
+        ("re-zero", 2, 21, (1050.0, 1050.0), 4.0, |t| {
+            if t >= 1050.0 { 4.0 } else { 0.0 }
+        }),
+        ("step", 4, 22, (972.0, 972.0), -2.5, |t| {
+            if t >= 972.0 { -2.5 } else { 0.0 }
+        }),
+        ("creep", 1, 23, (800.0, 824.0), 6.0, |t| {
+            6.0 * ((t - 800.0) / 24.0).clamp(0.0, 1.0)
+        }),
+    ];
+    for (name, gauge, seed, (start, end), plateau, shape) in cases {
+        let out = run(seed, move |t, g| if g == gauge { shape(t) } else { 0.0 });
+        let r = &out.report;
+        let alarms = &r.events.as_ref().unwrap().alarms;
+        eprintln!("{name}: {alarms:?}");
+        let want = format!("g{}", gauge + 1);
+        assert!(
+            alarms.iter().all(|a| a.gauge == want),
+            "{name}: alarms on other gauges: {alarms:?}"
+        );
+        let hit = alarms.iter().find(|a| {
+            let (lo, hi) = a.onset_day_interval;
+            lo * 24.0 <= end && start <= hi * 24.0
+        });
+        let a = hit.unwrap_or_else(|| panic!("{name}: no alarm dated at the onset: {alarms:?}"));
+        assert_eq!(
+            a.window,
+            bamudi::closeloop::AlarmWindow::Heldout,
+            "{name}: {a:?}"
+        );
+        // the creep's ramp is segmented too, so its size is checked against the whole step
+        // only when a single alarm covers it
+        if alarms.len() == 1 {
+            let (lo, hi) = a.size_interval;
+            assert!(lo <= plateau && plateau <= hi, "{name}: size {a:?}");
+        }
+        assert!(
+            !r.conclusion.starts_with("no missing effect"),
+            "{name}: {}",
+            r.conclusion
+        );
+        assert!(r.conclusion.contains(&want), "{name}: {}", r.conclusion);
     }
 }
 

@@ -97,11 +97,21 @@ min_relative_improvement = 0.05\n\
 temperature_columns = [\"air_temp_f\", \"water_temp_f\"]\n\
 parameter_name = \"gap\"\n\
 output_unit = \"microstrain\"\n\
-gap_segments = 6\n\
 max_generic_features = 3\n\
 ljung_box_lags = 10\n\
 significance = 0.01\n\
 confirm_candidates = 3\n\
+[event_scan]\n\
+enabled = true\n\
+min_segment_rows = 8\n\
+penalty_per_change_ln_n = 3.0\n\
+level = 0.95\n\
+[track]\n\
+enabled = true\n\
+window_hours = 24.0\n\
+in_control_windows = 3650.0\n\
+cusum_k = 0.5\n\
+grid_nodes = 41\n\
 [load]\n\
 name = \"head\"\n\
 weights = [1.0, -1.0]\n\

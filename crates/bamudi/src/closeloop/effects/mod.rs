@@ -47,7 +47,7 @@ pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<d
     }
     library.push(Arc::new(ParameterTrend {
         parameter: cfg.parameter_name.clone(),
-        segments: cfg.gap_segments,
+        track: cfg.track.clone(),
     }));
     library.push(Arc::new(Generic {
         max_features: cfg.max_generic_features,

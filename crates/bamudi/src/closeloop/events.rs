@@ -1,0 +1,277 @@
+//! The whole-record event scan: changes of level in every gauge's final residual, found over
+//! the whole record (the newest days included), dated with an interval and sized.
+//!
+//! The loop fits and selects effects on time windows, so an event that starts after the
+//! calibration window (a gauge re-zeroed, a debond, a shifted support) cannot be fitted there.
+//! The scan does not fit anything: it segments each gauge's residual (data − calibrated model −
+//! accepted effects) by [`numerics::changepoint`] (PELT, modified BIC, a robust AR(1)
+//! long-run noise scale per gauge) and reports every change it finds as an [`Alarm`]. An alarm
+//! is a statement about the data, not an effect: the loop's conclusion names it and never says
+//! "no missing effect found" while one stands.
+
+use super::record::MeasuredRecord;
+use crate::error::{BamudiError, Result};
+use nalgebra::DMatrix;
+use numerics::changepoint::{MeanChange, MeanChangeParams, detect_mean_changes};
+use serde::{Deserialize, Serialize};
+
+/// Settings of the event scan. Defaults in brackets.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EventScanConfig {
+    /// Whether the scan runs [true].
+    pub enabled: bool,
+    /// Fewest rows at a level: shorter excursions are outliers, not events [8].
+    pub min_segment_rows: usize,
+    /// Penalty per change in units of `ln n` [3, the modified BIC].
+    pub penalty_per_change_ln_n: f64,
+    /// Confidence level of the onset and size intervals [0.95].
+    pub level: f64,
+}
+
+impl Default for EventScanConfig {
+    fn default() -> Self {
+        let p = MeanChangeParams::default();
+        Self {
+            enabled: true,
+            min_segment_rows: p.min_segment,
+            penalty_per_change_ln_n: p.penalty_per_change_ln_n,
+            level: p.level,
+        }
+    }
+}
+
+impl EventScanConfig {
+    fn params(&self) -> MeanChangeParams {
+        MeanChangeParams {
+            min_segment: self.min_segment_rows,
+            penalty_per_change_ln_n: self.penalty_per_change_ln_n,
+            level: self.level,
+        }
+    }
+
+    pub(super) fn validate(&self) -> Result<()> {
+        let bad = |key: &'static str, why: &str| Err(BamudiError::config(key, why.to_string()));
+        if self.min_segment_rows < 2 {
+            return bad("event_scan.min_segment_rows", "must be at least 2");
+        }
+        if !(self.penalty_per_change_ln_n > 0.0 && self.penalty_per_change_ln_n.is_finite()) {
+            return bad("event_scan.penalty_per_change_ln_n", "must be positive");
+        }
+        if !(self.level > 0.5 && self.level < 1.0) {
+            return bad("event_scan.level", "must lie in (0.5, 1)");
+        }
+        Ok(())
+    }
+}
+
+/// The noise scale one gauge's residual was judged against.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct GaugeScale {
+    /// Gauge name.
+    pub gauge: String,
+    /// Marginal sd of the residual (output units).
+    pub marginal_sd: f64,
+    /// Lag-1 autocorrelation of its AR(1) reading.
+    pub phi: f64,
+    /// Long-run sd (output units): the scale of a level difference.
+    pub long_run_sd: f64,
+}
+
+/// Where an alarm's onset interval lies relative to the loop's windows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AlarmWindow {
+    /// Inside the calibration window.
+    Calibration,
+    /// Across the boundary between the windows.
+    Split,
+    /// After the calibration window: the loop could not fit it.
+    Heldout,
+}
+
+/// One change of level in one gauge's residual.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Alarm {
+    /// Gauge name.
+    pub gauge: String,
+    /// Time of the first row at the new level (days since the first row).
+    pub onset_day: f64,
+    /// Interval of the onset at the scan's level (days): after the first and by the second.
+    pub onset_day_interval: (f64, f64),
+    /// The onset as an ISO 8601 UTC time, when the record's time column was a date.
+    pub onset_time: Option<String>,
+    /// CSV line of the first row at the new level.
+    pub onset_csv_line: u64,
+    /// Level after minus level before (output units).
+    pub size: f64,
+    /// Standard deviation of `size` (output units).
+    pub size_sd: f64,
+    /// Interval of `size` at the scan's level.
+    pub size_interval: (f64, f64),
+    /// Where the onset lies.
+    pub window: AlarmWindow,
+    /// Other gauges with a change whose onset interval overlaps this one.
+    pub coincident_gauges: Vec<String>,
+    /// One sentence on what it may mean.
+    pub reading: String,
+}
+
+/// What the scan found.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct EventScan {
+    /// Method, in one line.
+    pub method: String,
+    /// The settings used.
+    pub config: EventScanConfig,
+    /// Per gauge: the noise scale its changes were judged against.
+    pub scales: Vec<GaugeScale>,
+    /// Every change, in time order.
+    pub alarms: Vec<Alarm>,
+}
+
+impl EventScan {
+    /// Up to `k` alarms, largest `|size| / size_sd` first, in one line each.
+    pub fn headline(&self, k: usize, unit: &str) -> Vec<String> {
+        let mut order: Vec<&Alarm> = self.alarms.iter().collect();
+        order.sort_by(|a, b| {
+            (b.size / b.size_sd)
+                .abs()
+                .total_cmp(&(a.size / a.size_sd).abs())
+        });
+        order
+            .into_iter()
+            .take(k)
+            .map(|a| {
+                format!(
+                    "{} {:+.2} ± {:.2} {unit} at day {:.2} [{:.2}, {:.2}] ({})",
+                    a.gauge,
+                    a.size,
+                    0.5 * (a.size_interval.1 - a.size_interval.0),
+                    a.onset_day,
+                    a.onset_day_interval.0,
+                    a.onset_day_interval.1,
+                    match a.window {
+                        AlarmWindow::Calibration => "calibration window",
+                        AlarmWindow::Split => "at the window split",
+                        AlarmWindow::Heldout => "after the calibration window, not fitted",
+                    }
+                )
+            })
+            .collect()
+    }
+}
+
+/// Scans every gauge's residual `r` (`n x N_o`) of `rec`; `n_cal` rows form the calibration
+/// window.
+pub(super) fn scan(
+    rec: &MeasuredRecord,
+    r: &DMatrix<f64>,
+    n_cal: usize,
+    cfg: &EventScanConfig,
+) -> Result<EventScan> {
+    let params = cfg.params();
+    let (mut scales, mut alarms) = (vec![], vec![]);
+    for (g, name) in rec.gauge_names.iter().enumerate() {
+        let col: Vec<f64> = r.column(g).iter().copied().collect();
+        let found = detect_mean_changes(&col, &params).map_err(|e| BamudiError::Numerical {
+            context: format!("event scan of gauge {name}"),
+            reason: e.to_string(),
+        })?;
+        scales.push(GaugeScale {
+            gauge: name.clone(),
+            marginal_sd: found.scale.marginal_sd,
+            phi: found.scale.phi,
+            long_run_sd: found.scale.long_run_sd,
+        });
+        alarms.extend(found.changes.iter().map(|c| alarm(rec, name, c, n_cal)));
+    }
+    mark_coincident(&mut alarms);
+    alarms.sort_by(|a, b| a.onset_day.total_cmp(&b.onset_day));
+    Ok(EventScan {
+        method: "PELT over the whole record per gauge residual, modified BIC penalty, robust AR(1) long-run noise scale; onset intervals from the least-squares location law (Bai 1997)".into(),
+        config: cfg.clone(),
+        scales,
+        alarms,
+    })
+}
+
+/// The alarm of change `c` on gauge `name`.
+fn alarm(rec: &MeasuredRecord, name: &str, c: &MeanChange, n_cal: usize) -> Alarm {
+    let day = |row: usize| rec.time_h[row] / 24.0;
+    let (lo, hi) = c.interval;
+    let window = if lo > n_cal {
+        AlarmWindow::Heldout
+    } else if hi < n_cal {
+        AlarmWindow::Calibration
+    } else {
+        AlarmWindow::Split
+    };
+    let onset_time = (rec.start_unix_s != 0.0)
+        .then(|| {
+            let s = rec.start_unix_s + rec.time_h[c.first_row_after] * 3600.0;
+            jiff::Timestamp::from_second(s.round() as i64).ok()
+        })
+        .flatten()
+        .map(|t| t.to_string());
+    Alarm {
+        gauge: name.to_string(),
+        onset_day: day(c.first_row_after),
+        onset_day_interval: (day(lo - 1), day(hi)),
+        onset_time,
+        onset_csv_line: rec.source_lines[c.first_row_after],
+        size: c.size,
+        size_sd: c.size_sd,
+        size_interval: (c.size - c.size_half_width, c.size + c.size_half_width),
+        window,
+        coincident_gauges: vec![],
+        reading: String::new(),
+    }
+}
+
+/// Fills `coincident_gauges` (overlapping onset intervals on other gauges) and `reading`.
+fn mark_coincident(alarms: &mut [Alarm]) {
+    let overlaps = |a: &Alarm, b: &Alarm| {
+        a.gauge != b.gauge
+            && a.onset_day_interval.0 <= b.onset_day_interval.1
+            && b.onset_day_interval.0 <= a.onset_day_interval.1
+    };
+    let coincident: Vec<Vec<String>> = alarms
+        .iter()
+        .map(|a| {
+            let mut g: Vec<String> = alarms
+                .iter()
+                .filter(|b| overlaps(a, b))
+                .map(|b| b.gauge.clone())
+                .collect();
+            g.dedup();
+            g
+        })
+        .collect();
+    for (a, g) in alarms.iter_mut().zip(coincident) {
+        a.reading = reading(a.window, g.len());
+        a.coincident_gauges = g;
+    }
+}
+
+/// What an alarm in `window`, shared with `others` gauges, may mean.
+fn reading(window: AlarmWindow, others: usize) -> String {
+    let cause = if others >= 2 {
+        format!(
+            "{} gauges change together: a change of the structure, its supports or the loads is more likely than one sensor",
+            others + 1
+        )
+    } else {
+        "a change on this gauge alone: a re-zeroed, slipped or debonding sensor is the first suspect".into()
+    };
+    let when = match window {
+        AlarmWindow::Calibration => {
+            "inside the calibration window and not explained by the accepted effects"
+        }
+        AlarmWindow::Split => {
+            "at the boundary of the calibration window: the calibrated model may not predict the later data at this level, or an event happened then"
+        }
+        AlarmWindow::Heldout => "after the calibration window, so the loop could not fit it",
+    };
+    format!("{when}; {cause}")
+}
