@@ -285,6 +285,15 @@ impl CalibratedModel for CalibratedGate {
         self.predictor()?.outputs_at_theta(x, &thetas)
     }
 
+    fn predict_at_thetas(
+        &self,
+        x: &DMatrix<f64>,
+        thetas: &[f64],
+    ) -> bamudi::Result<Vec<DMatrix<f64>>> {
+        let thetas: Vec<Vec<f64>> = thetas.iter().map(|t| vec![*t]).collect();
+        self.predictor()?.outputs_at_thetas(x, &thetas)
+    }
+
     fn theta_summary(&self) -> ThetaSummary {
         self.cal.module3().posterior.summary(0)
     }

@@ -85,6 +85,15 @@ pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
     fn predict(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)>;
     /// Mean output conditional on `θ = theta[i]` for row `i` (Eq. 50 at fixed `θ`).
     fn predict_at_theta(&self, x: &DMatrix<f64>, theta: &[f64]) -> Result<DMatrix<f64>>;
+    /// Mean outputs at every row of `x` for each of `thetas`, all rows at the same `θ` (one
+    /// matrix per `θ`). The default calls [`Self::predict_at_theta`] once per `θ`; a model whose
+    /// `θ`-independent part is costly at `x` (BA-MUDI's discrepancy) computes it once.
+    fn predict_at_thetas(&self, x: &DMatrix<f64>, thetas: &[f64]) -> Result<Vec<DMatrix<f64>>> {
+        thetas
+            .iter()
+            .map(|&t| self.predict_at_theta(x, &vec![t; x.nrows()]))
+            .collect()
+    }
     /// Posterior summary of θ.
     fn theta_summary(&self) -> ThetaSummary;
     /// Support of the prior of `θ`.

@@ -231,6 +231,32 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         Ok(DMatrix::from_fn(x.nrows(), bm.nrows(), |i, q| rows[i][q]))
     }
 
+    /// Mean outputs at every row of `x` for each of `thetas` (one `n x N_o` matrix per `θ`):
+    /// [`Self::outputs_at_theta`] with every row at the same `θ`, the coefficients' posterior at
+    /// `x` (which does not depend on `θ`) computed once for all of them.
+    pub fn outputs_at_thetas(
+        &self,
+        x: &DMatrix<f64>,
+        thetas: &[Vec<f64>],
+    ) -> Result<Vec<DMatrix<f64>>> {
+        let (mu, _) = self.alpha_moments(x)?;
+        let bm = self.basis().1;
+        let rho = self.cal.rho_star();
+        let n = x.nrows();
+        let cells = (0..n * thetas.len())
+            .into_par_iter()
+            .map(|k| {
+                let (j, i) = (k / n, k % n);
+                let xi: Vec<f64> = x.row(i).iter().copied().collect();
+                let (ag, off) = self.model_parts(&xi, &thetas[j])?;
+                Ok(ag * rho + off + bm * mu.row(i).transpose())
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok((0..thetas.len())
+            .map(|j| DMatrix::from_fn(n, bm.nrows(), |i, q| cells[j * n + i][q]))
+            .collect())
+    }
+
     /// `A g_u(x, θ)` and `b(x, θ)` (output units).
     fn model_parts(&self, x: &[f64], theta: &[f64]) -> Result<(DVector<f64>, DVector<f64>)> {
         let parts = self.cal.parts();

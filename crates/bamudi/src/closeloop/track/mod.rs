@@ -320,22 +320,20 @@ fn window_estimate(
     let (lo, hi) = inp.model.theta_bounds();
     let x = super::stats::select_rows(inp.x, rows);
     let y = super::stats::select_rows(inp.target, rows);
-    let sse = |th: f64| -> Result<f64> {
-        let p = inp.model.predict_at_theta(&x, &vec![th; rows.len()])?;
-        Ok((&y - p).norm_squared())
+    // the misfit at several θ in one call: the model's θ-independent part at x is shared
+    let sse = |th: &[f64]| -> Result<Vec<f64>> {
+        let p = inp.model.predict_at_thetas(&x, th)?;
+        Ok(p.iter().map(|p| (&y - p).norm_squared()).collect())
     };
     let step = (hi - lo) / (nodes - 1) as f64;
     let h = 0.25 * step;
     let grid_minimum = || -> Result<f64> {
-        let mut best = (f64::INFINITY, lo);
-        for j in 0..nodes {
-            let th = lo + step * j as f64;
-            let v = sse(th)?;
-            if v < best.0 {
-                best = (v, th);
-            }
-        }
-        Ok(best.1)
+        let grid: Vec<f64> = (0..nodes).map(|j| lo + step * j as f64).collect();
+        let v = sse(&grid)?;
+        let best = (0..nodes)
+            .min_by(|&a, &b| v[a].total_cmp(&v[b]))
+            .unwrap_or(0);
+        Ok(grid[best])
     };
     let (mut c, mut global) = match start {
         Some(s) => (s, false),
@@ -343,7 +341,8 @@ fn window_estimate(
     };
     for _ in 0..6 {
         c = c.clamp(lo + h, hi - h);
-        let (y0, y1, y2) = (sse(c - h)?, sse(c)?, sse(c + h)?);
+        let v = sse(&[c - h, c, c + h])?;
+        let (y0, y1, y2) = (v[0], v[1], v[2]);
         let curv = (y0 - 2.0 * y1 + y2) / (h * h);
         let convex = curv > 0.0 && curv.is_finite();
         let v = if convex {
