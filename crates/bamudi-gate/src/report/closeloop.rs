@@ -258,8 +258,9 @@ fn checks_section(s: &mut String, r: &CloseLoopReport) {
     }
 }
 
-/// Writes `report.md`, `results.json`, `rmse.svg`, `theta.svg` and one
-/// `residual_vs_<covariate>.svg` per accepted effect into `dir` (created if needed); with
+/// Writes `report.md`, `results.json`, `rmse.svg`, `theta.svg`, `theta_track.svg` (when the
+/// gap was tracked) and one `residual_vs_<covariate>.svg` per accepted effect into `dir`
+/// (created if needed); with
 /// `fatigue`, a section on the quoin block's fatigue over the record, its `results.json` key
 /// `record_fatigue` and `fatigue_along_quoin.svg`. Returns the written paths.
 ///
