@@ -162,6 +162,15 @@ pub struct TrackState {
 impl TrackState {
     /// Mean and sd of the level `dt` days later, with level and slope random-walk variances
     /// `ql`, `qs` per day.
+    ///
+    /// ```
+    /// use bamudi::closeloop::TrackState;
+    /// // a gap of 120 in opening by 0.5 in/day, both known to ± 0.1
+    /// let s = TrackState { day: 50.0, level: 120.0, slope: 0.5, cov: [[0.01, 0.0], [0.0, 0.01]] };
+    /// let (m, sd) = s.extrapolate(2.0, 0.0, 0.0);
+    /// assert_eq!(m, 121.0);
+    /// assert!((sd - (0.01f64 + 4.0 * 0.01).sqrt()).abs() < 1e-12);
+    /// ```
     pub fn extrapolate(&self, dt: f64, ql: f64, qs: f64) -> (f64, f64) {
         let c = &self.cov;
         let var =
