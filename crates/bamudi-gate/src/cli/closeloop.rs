@@ -24,10 +24,15 @@ pub struct CloseLoopCmd {
     /// Measured CSV (`time`, `h_up`, `h_down`, gauge columns, covariates).
     #[arg(long)]
     data: PathBuf,
-    /// Fraction of the record (the end, in time) held out for the checks; overrides
+    /// Fraction of the record (the end, in time) after the calibration window: the
+    /// validation window (rolling-origin selection) and the final test window; overrides
     /// `calibration_fraction` of the configuration (`1 - holdout_fraction`).
     #[arg(long, allow_negative_numbers = true)]
     holdout_fraction: Option<f64>,
+    /// Fraction of the record at its end that selection never sees, where the before/after
+    /// error is reported; overrides `test_fraction` of the configuration (default 0.2).
+    #[arg(long, allow_negative_numbers = true)]
+    test_fraction: Option<f64>,
     /// Optional TOML file with a close-loop configuration (missing keys take their defaults).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -183,6 +188,11 @@ fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
         }
         None => cfg,
     };
+    let cfg = match c.test_fraction {
+        Some(t) => cfg.test_fraction(t),
+        None => cfg,
+    };
+    cfg.validate()?;
     Ok(gate::close_loop_config(cfg))
 }
 
@@ -228,7 +238,8 @@ fn calibrator(
 fn print_summary(report: &CloseLoopReport) {
     println!("{}", report.conclusion);
     println!(
-        "held-out RMSE {:.3} -> {:.3} microstrain; gap {:.2} ± {:.2} -> {:.2} ± {:.2} in",
+        "RMSE on the {} window {:.3} -> {:.3} microstrain; gap {:.2} ± {:.2} -> {:.2} ± {:.2} in",
+        report.error_window,
         report.heldout_rmse_total_before,
         report.heldout_rmse_total_after,
         report.theta_before.mean,

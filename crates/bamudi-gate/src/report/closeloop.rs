@@ -14,14 +14,30 @@ use std::path::{Path, PathBuf};
 pub fn markdown(r: &CloseLoopReport) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Close-the-loop report: {}\n", r.file);
+    let origins: Vec<String> = r
+        .selection_origin_days
+        .iter()
+        .map(|d| format!("{d:.1}"))
+        .collect();
+    let test = match r.test_start_day {
+        Some(d) => format!("{} test rows from day {d:.1}", r.n_test),
+        None => "no test window".into(),
+    };
     let _ = writeln!(
         s,
-        "{} rows ({} calibration, {} held-out from day {:.1}); {} rows dropped and {} cells imputed for missing gauge values; \
+        "{} rows: {} calibration, {} validation from day {:.1} (rolling origins at days {}), {test}; \
+         the before/after error is on the {} window{}. {} rows dropped and {} cells imputed for missing gauge values; \
          white-noise sd from first differences {:.3} microstrain.\n",
         r.n_rows,
         r.n_calibration,
-        r.n_heldout,
+        r.n_validation,
         r.split_day,
+        origins.join(", "),
+        r.error_window,
+        match r.error_window.as_str() {
+            "test" => " (selection never used it)",
+            _ => " (selection used it: no test window)",
+        },
         r.dropped_missing,
         r.imputed,
         r.noise_sd_estimate
@@ -49,11 +65,11 @@ pub fn markdown(r: &CloseLoopReport) -> String {
     s
 }
 
-/// Held-out RMSE per gauge before and after, and the gap before and after.
+/// RMSE per gauge on the error window before and after, and the gap before and after.
 fn rmse_table(s: &mut String, r: &CloseLoopReport) {
     let _ = writeln!(
         s,
-        "| gauge | held-out RMSE before (microstrain) | after (microstrain) |\n|---|---|---|"
+        "| gauge | RMSE before, error window (microstrain) | after (microstrain) |\n|---|---|---|"
     );
     for (k, g) in r.gauge_names.iter().enumerate() {
         let _ = writeln!(
@@ -219,7 +235,7 @@ fn steps_section(s: &mut String, r: &CloseLoopReport) {
     for st in &r.steps {
         let _ = writeln!(
             s,
-            "### Step {} — {}\n\n| candidate | covariates | screened held-out MSE (microstrain²) | screened improvement | held-out MSE after re-calibration (microstrain²) | improvement after re-calibration |\n|---|---|---|---|---|---|",
+            "### Step {} — {}\n\n| candidate | covariates | screened cross-validated MSE (microstrain²) | screened improvement | cross-validated MSE after re-calibration (microstrain²) | improvement after re-calibration |\n|---|---|---|---|---|---|",
             st.step, st.decision
         );
         for c in &st.candidates {
@@ -387,8 +403,8 @@ fn plot_fatigue(f: &RecordFatigue, path: &Path) -> Result<()> {
     line_plot(path, &axes, &series)
 }
 
-/// Held-out RMSE per gauge, before and after the loop: one group of two bars per gauge,
-/// every gauge named under its group.
+/// RMSE per gauge on the error window (the test window), before and after the loop: one
+/// group of two bars per gauge, every gauge named under its group.
 fn plot_rmse(r: &CloseLoopReport, path: &Path) -> Result<()> {
     svg_figure(path, (960, 460), |root| {
         let (plot, legend) = root.split_horizontally(760);
@@ -402,7 +418,7 @@ fn plot_rmse(r: &CloseLoopReport, path: &Path) -> Result<()> {
             + 1e-9;
         let mut ch = ChartBuilder::on(&plot)
             .caption(
-                "Held-out RMSE per gauge, before and after the loop",
+                "RMSE per gauge on the error window, before and after the loop",
                 ("sans-serif", 18),
             )
             .margin(12)
@@ -517,7 +533,7 @@ fn plot_residual_vs(out: &CloseLoopOutcome, cov: &str, path: &Path) -> Result<()
         return Ok(());
     };
     let ho = &out.heldout_rows;
-    // the gauge whose held-out RMSE improved most
+    // the gauge whose error-window RMSE improved most
     let r = &out.report;
     let g = (0..r.gauge_names.len())
         .max_by(|&a, &b| {

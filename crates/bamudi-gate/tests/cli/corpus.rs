@@ -1594,6 +1594,21 @@ fn close_loop_config_files(base: &Base) -> Vec<Case> {
             &["calibration_fraction"],
         ),
         lc(
+            "no_validation_window",
+            "test_fraction = 0.45\n",
+            &["test_fraction"],
+        ),
+        lc(
+            "test_fraction_negative",
+            "test_fraction = -0.1\n",
+            &["test_fraction"],
+        ),
+        lc(
+            "no_selection_origin",
+            "selection_origins = 0\n",
+            &["selection_origins"],
+        ),
+        lc(
             "significance_zero",
             "significance = 0.0\n",
             &["significance"],

@@ -80,9 +80,20 @@ impl LoadSpec {
 pub struct CloseLoopConfig {
     /// Fraction of the record (in time order) used for calibration [0.6].
     pub calibration_fraction: f64,
+    /// Fraction of the record at its end kept as the final test window [0.2]: selection never
+    /// sees it, and the loop's before/after error is reported on it. The rows between the
+    /// calibration window and the test window are the validation window, where candidates
+    /// are scored by rolling origins. `0` reports the error on the validation window instead
+    /// (then selection has seen it; `results.json` says so in `error_window`).
+    pub test_fraction: f64,
+    /// Evaluation origins in the validation window [3]: at each origin every candidate (and
+    /// every accepted effect) is fitted on all rows before it and scored on the rows up to
+    /// the next origin (rolling-origin cross-validation); the first origin is the end of the
+    /// calibration window.
+    pub selection_origins: usize,
     /// Maximum number of effects added [4].
     pub max_steps: usize,
-    /// Minimum relative reduction of the held-out mean square error to accept an effect [0.05].
+    /// Minimum relative reduction of the cross-validated mean square error to accept an effect [0.05].
     pub min_relative_improvement: f64,
     /// Temperature columns for the thermal effect; `None` = every column whose name contains
     /// `temp` [None].
@@ -117,6 +128,8 @@ impl Default for CloseLoopConfig {
     fn default() -> Self {
         Self {
             calibration_fraction: 0.6,
+            test_fraction: 0.2,
+            selection_origins: 3,
             max_steps: 4,
             min_relative_improvement: 0.05,
             temperature_columns: None,
@@ -145,6 +158,26 @@ impl CloseLoopConfig {
         self.calibration_fraction = f;
         self
     }
+    /// Sets the fraction of the record kept as the final test window.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().test_fraction(0.25);
+    /// assert_eq!(c.test_fraction, 0.25);
+    /// ```
+    pub fn test_fraction(mut self, f: f64) -> Self {
+        self.test_fraction = f;
+        self
+    }
+    /// Sets the number of rolling-origin evaluation origins in the validation window.
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().selection_origins(4);
+    /// assert_eq!(c.selection_origins, 4);
+    /// ```
+    pub fn selection_origins(mut self, k: usize) -> Self {
+        self.selection_origins = k;
+        self
+    }
     /// Sets the maximum number of effects.
     ///
     /// ```
@@ -155,7 +188,7 @@ impl CloseLoopConfig {
         self.max_steps = n;
         self
     }
-    /// Sets the minimum relative held-out improvement.
+    /// Sets the minimum relative cross-validated improvement.
     ///
     /// ```
     /// let c = bamudi::closeloop::CloseLoopConfig::default().min_relative_improvement(0.1);
@@ -210,6 +243,18 @@ impl CloseLoopConfig {
                 "calibration_fraction",
                 format!("must be in (0, 1), got {}", self.calibration_fraction),
             );
+        }
+        if !(self.test_fraction >= 0.0 && self.calibration_fraction + self.test_fraction < 1.0) {
+            return bad(
+                "test_fraction",
+                format!(
+                    "must be >= 0 and leave a validation window after the calibration window (calibration_fraction + test_fraction < 1), got {} with calibration_fraction {}",
+                    self.test_fraction, self.calibration_fraction
+                ),
+            );
+        }
+        if self.selection_origins == 0 {
+            return bad("selection_origins", "must be >= 1".into());
         }
         if self.min_relative_improvement.is_nan() || self.min_relative_improvement < 0.0 {
             return bad(

@@ -1,6 +1,7 @@
 //! The open effect library: an [`Effect`] is a parametric term the calibrated model may lack
 //! (a gauge drifting, a thermal strain, ...). The loop fits each effect of its library to the
-//! residual on the calibration window and keeps the one that explains the most held-out error.
+//! residual on the rows before each evaluation origin and keeps the one that explains the most
+//! cross-validated error.
 //! A user adds an effect by implementing the trait; nothing in the crate changes.
 //!
 //! ```

@@ -2,7 +2,9 @@
 //! the whole record (the newest days included), dated with an interval and sized.
 //!
 //! The loop fits and selects effects on time windows, so an event that starts after the
-//! calibration window (a gauge re-zeroed, a debond, a shifted support) cannot be fitted there.
+//! calibration window (a gauge re-zeroed, a debond, a shifted support) is not fitted: an
+//! effect must be visible in the calibration window to be a candidate, and a change of the
+//! gap needs two rolling-origin folds after it.
 //! The scan does not fit anything: it segments each gauge's residual (data − calibrated model −
 //! accepted effects) by [`numerics::changepoint`] (PELT, modified BIC, a robust AR(1)
 //! long-run noise scale per gauge) and reports every change it finds as an [`Alarm`]. An alarm
@@ -82,12 +84,13 @@ pub struct GaugeScale {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum AlarmWindow {
-    /// Inside the calibration window.
-    Calibration,
-    /// Across the boundary between the windows.
+    /// Inside the rows the loop fits and selects its effects on (the calibration and
+    /// validation windows).
+    Selection,
+    /// Across the boundary between those rows and the test window.
     Split,
-    /// After the calibration window: the loop could not fit it.
-    Heldout,
+    /// In the final test window, which the loop never fits or selects on.
+    Test,
 }
 
 /// One change of level in one gauge's residual.
@@ -118,6 +121,23 @@ pub struct Alarm {
 }
 
 /// What the scan found.
+///
+/// ```
+/// use bamudi::closeloop::{AlarmWindow, CloseLoopConfig, close_loop};
+/// use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with};
+/// let gate = ToyGate::default();
+/// // 30 days hourly; gauge g2 re-zeroed by +6 microstrain at hour 650, in the test window
+/// let rec = record_with(&gate, 720, 3, |t, g| if g == 1 && t >= 650.0 { 6.0 } else { 0.0 }).unwrap();
+/// let calibrator = GridCalibrator::new(gate, (40.0, 200.0));
+/// let out = close_loop(&rec, &calibrator, &CloseLoopConfig::default()).unwrap();
+/// let scan = out.report.events.expect("the scan runs by default");
+/// assert_eq!(scan.alarms.len(), 1);
+/// let a = &scan.alarms[0];
+/// assert_eq!((a.gauge.as_str(), a.window), ("g2", AlarmWindow::Test));
+/// let (lo, hi) = a.onset_day_interval;
+/// assert!(lo <= 650.0 / 24.0 && 650.0 / 24.0 <= hi);
+/// assert!(a.size_interval.0 <= 6.0 && 6.0 <= a.size_interval.1);
+/// ```
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct EventScan {
     /// Method, in one line.
@@ -152,9 +172,9 @@ impl EventScan {
                     a.onset_day_interval.0,
                     a.onset_day_interval.1,
                     match a.window {
-                        AlarmWindow::Calibration => "calibration window",
-                        AlarmWindow::Split => "at the window split",
-                        AlarmWindow::Heldout => "after the calibration window, not fitted",
+                        AlarmWindow::Selection => "in the rows selection used",
+                        AlarmWindow::Split => "at the start of the test window",
+                        AlarmWindow::Test => "in the test window, not fitted",
                     }
                 )
             })
@@ -162,12 +182,12 @@ impl EventScan {
     }
 }
 
-/// Scans every gauge's residual `r` (`n x N_o`) of `rec`; `n_cal` rows form the calibration
-/// window.
+/// Scans every gauge's residual `r` (`n x N_o`) of `rec`; the first `n_sel` rows are those
+/// the loop fitted its effects on.
 pub(super) fn scan(
     rec: &MeasuredRecord,
     r: &DMatrix<f64>,
-    n_cal: usize,
+    n_sel: usize,
     cfg: &EventScanConfig,
 ) -> Result<EventScan> {
     let params = cfg.params();
@@ -184,7 +204,7 @@ pub(super) fn scan(
             phi: found.scale.phi,
             long_run_sd: found.scale.long_run_sd,
         });
-        alarms.extend(found.changes.iter().map(|c| alarm(rec, name, c, n_cal)));
+        alarms.extend(found.changes.iter().map(|c| alarm(rec, name, c, n_sel)));
     }
     mark_coincident(&mut alarms);
     alarms.sort_by(|a, b| a.onset_day.total_cmp(&b.onset_day));
@@ -197,13 +217,13 @@ pub(super) fn scan(
 }
 
 /// The alarm of change `c` on gauge `name`.
-fn alarm(rec: &MeasuredRecord, name: &str, c: &MeanChange, n_cal: usize) -> Alarm {
+fn alarm(rec: &MeasuredRecord, name: &str, c: &MeanChange, n_sel: usize) -> Alarm {
     let day = |row: usize| rec.time_h[row] / 24.0;
     let (lo, hi) = c.interval;
-    let window = if lo > n_cal {
-        AlarmWindow::Heldout
-    } else if hi < n_cal {
-        AlarmWindow::Calibration
+    let window = if lo > n_sel {
+        AlarmWindow::Test
+    } else if hi < n_sel {
+        AlarmWindow::Selection
     } else {
         AlarmWindow::Split
     };
@@ -265,13 +285,13 @@ fn reading(window: AlarmWindow, others: usize) -> String {
         "a change on this gauge alone: a re-zeroed, slipped or debonding sensor is the first suspect".into()
     };
     let when = match window {
-        AlarmWindow::Calibration => {
-            "inside the calibration window and not explained by the accepted effects"
+        AlarmWindow::Selection => {
+            "inside the rows selection used and not explained by the accepted effects (an event after the calibration window is not fitted)"
         }
         AlarmWindow::Split => {
-            "at the boundary of the calibration window: the calibrated model may not predict the later data at this level, or an event happened then"
+            "at the start of the test window: the model and effects fitted before it may not predict the later data at this level, or an event happened then"
         }
-        AlarmWindow::Heldout => "after the calibration window, so the loop could not fit it",
+        AlarmWindow::Test => "in the test window, which the loop never fits",
     };
     format!("{when}; {cause}")
 }

@@ -5,26 +5,33 @@
 //! [`testing::GridCalibrator`] in tests), [`close_loop`]:
 //!
 //! 1. splits the record in time into a calibration window (first
-//!    [`CloseLoopConfig::calibration_fraction`]) and a held-out window;
+//!    [`CloseLoopConfig::calibration_fraction`]), a validation window cut into rolling-origin
+//!    folds ([`CloseLoopConfig::selection_origins`]) and a final test window (last
+//!    [`CloseLoopConfig::test_fraction`]) that selection never sees;
 //! 2. calibrates on the calibration window and computes residuals and standardised residuals
-//!    (residual / predictive sd) on both windows, with adequacy checks: bias per output,
+//!    (residual / predictive sd) on each window, with adequacy checks: bias per output,
 //!    variance against the predictive variance, lag-1 autocorrelation and Ljung-Box, and
 //!    correlation with every covariate (time, the inputs, the declared load, their rates of
 //!    change, and every other CSV column);
-//! 3. ranks candidate explanations by the HELD-OUT mean square error they remove: an open
-//!    library of [`Effect`]s ([`effects::default_library`]: gauge offset, drift, offset jump,
-//!    thermal strain with a fitted lag, load-path hysteresis, a parameter changing in time,
-//!    and a data-driven term), each fitted on the calibration window only; where the
+//! 3. ranks candidate explanations by the CROSS-VALIDATED mean square error they remove on
+//!    the validation window: an open library of [`Effect`]s ([`effects::default_library`]:
+//!    gauge offset, drift, offset jump, thermal strain with a fitted lag, load-path
+//!    hysteresis, a parameter changing in time, and a data-driven term), each fitted at every
+//!    origin on all rows before it and scored up to the next origin; where the
 //!    calibrated model would re-absorb functions of the load
 //!    ([`CalibratedModel::absorbs_load_functions`], BA-MUDI's discrepancy), jointly with a
 //!    smooth function of the load, so that what the first calibration absorbed of an effect
 //!    does not hide it;
 //! 4. adds each of the most promising candidates ([`CloseLoopConfig::confirm_candidates`]) to
-//!    the model, re-calibrates and back-fits, and accepts the best only if it then lowers the
-//!    held-out mean square error by more than [`CloseLoopConfig::min_relative_improvement`]
-//!    (the data-driven term must beat the best physical effect by that margin too); repeats
-//!    until the residuals pass the checks or nothing improves;
-//! 5. scans every gauge's final residual over the whole record, the newest data included, for
+//!    the model, re-calibrates and back-fits on the calibration window (one origin: each
+//!    origin would cost a calibration per candidate), re-fits the effects at the later
+//!    origins, and accepts the best only if it then lowers the cross-validated mean square
+//!    error by more than [`CloseLoopConfig::min_relative_improvement`] (the data-driven term
+//!    must beat the best physical effect by that margin too); repeats until the calibration
+//!    and validation residuals pass the checks or nothing improves;
+//! 5. re-fits the accepted effects on every row selection used and reports the error before
+//!    and after on the test window (`error_window` in the report);
+//! 6. scans every gauge's final residual over the whole record, the newest data included, for
 //!    changes of level ([`EventScan`]: alarms dated and sized with intervals), and tracks `θ`
 //!    through the record ([`ThetaTrack`]: window estimates, a local linear trend with 95 %
 //!    bands, `θ` now, a change alarm with its delay).
@@ -88,6 +95,18 @@ pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
     /// Mean outputs at every row of `x` for each of `thetas`, all rows at the same `θ` (one
     /// matrix per `θ`). The default calls [`Self::predict_at_theta`] once per `θ`; a model whose
     /// `θ`-independent part is costly at `x` (BA-MUDI's discrepancy) computes it once.
+    ///
+    /// ```
+    /// use bamudi::closeloop::{CalibratedModel, Calibrator, testing::{GridCalibrator, ToyGate}};
+    /// let gate = ToyGate::default();
+    /// let rows = [[540.0, 180.0], [500.0, 180.0], [400.0, 180.0]];
+    /// let x = nalgebra::DMatrix::from_fn(3, 2, |i, j| rows[i][j]);
+    /// let y = nalgebra::DMatrix::from_fn(3, 7, |i, g| gate.strain(rows[i][0], rows[i][1], 90.0)[g]);
+    /// let m = GridCalibrator::new(gate, (40.0, 200.0)).calibrate(&x, &y).unwrap();
+    /// let at = m.predict_at_thetas(&x, &[80.0, 100.0]).unwrap();
+    /// assert_eq!(at[1], m.predict_at_theta(&x, &[100.0; 3]).unwrap());
+    /// assert!(at[0] != at[1]); // the gap moves the strains
+    /// ```
     fn predict_at_thetas(&self, x: &DMatrix<f64>, thetas: &[f64]) -> Result<Vec<DMatrix<f64>>> {
         thetas
             .iter()
@@ -136,17 +155,20 @@ pub struct CandidateScore {
     pub name: String,
     /// Covariates used.
     pub covariates: Vec<String>,
-    /// Screening: held-out mean square residual with the candidate fitted on the calibration
-    /// window (jointly with the load nuisance where the model absorbs one; microstrain²).
+    /// Screening: cross-validated mean square residual on the validation window, the
+    /// candidate fitted at each rolling origin on all rows before it (jointly with the load
+    /// nuisance where the model absorbs one; microstrain²).
     pub heldout_mse: f64,
-    /// Screening: reduction of the held-out mean square residual against the nuisance-only
-    /// fit (or the residual itself), relative to the MSE before the step.
+    /// Screening: reduction of that mean square residual against the nuisance-only fit (or
+    /// the residual itself), relative to the MSE before the step.
     pub relative_improvement: f64,
-    /// Held-out mean square residual after adding the candidate, re-calibrating and
-    /// back-fitting (microstrain²); `None` when it was not among the confirmed candidates.
+    /// Cross-validated mean square residual on the validation window after adding the
+    /// candidate, re-calibrating and back-fitting on the calibration window, every effect
+    /// re-fitted at each later origin (microstrain²); `None` when it was not among the
+    /// confirmed candidates.
     #[serde(default)]
     pub recalibrated_heldout_mse: Option<f64>,
-    /// Relative reduction of the held-out MSE after re-calibration (what the decision uses).
+    /// Relative reduction of that MSE after re-calibration (what the decision uses).
     #[serde(default)]
     pub recalibrated_relative_improvement: Option<f64>,
 }
@@ -156,7 +178,8 @@ pub struct CandidateScore {
 pub struct StepReport {
     /// Step number (1-based).
     pub step: usize,
-    /// Held-out mean square residual before this step (microstrain²).
+    /// Cross-validated mean square residual on the validation window before this step
+    /// (microstrain²).
     pub heldout_mse_before: f64,
     /// Candidates, best first.
     pub candidates: Vec<CandidateScore>,
@@ -164,7 +187,7 @@ pub struct StepReport {
     pub accepted: Option<String>,
     /// Why the step ended as it did.
     pub decision: String,
-    /// Held-out RMSE per gauge after the step (output units).
+    /// Cross-validated RMSE per gauge on the validation window after the step (output units).
     pub heldout_rmse_after: Vec<f64>,
     /// θ after re-calibration.
     pub theta_after: ThetaSummary,
@@ -177,29 +200,47 @@ pub struct CloseLoopReport {
     pub file: String,
     /// Gauge names.
     pub gauge_names: Vec<String>,
-    /// Rows used, rows in the calibration and held-out windows.
+    /// Rows used.
     pub n_rows: usize,
     /// Rows in the calibration window.
     pub n_calibration: usize,
-    /// Rows in the held-out window.
+    /// Rows after the calibration window (validation and test windows).
     pub n_heldout: usize,
+    /// Rows in the validation window (rolling-origin selection).
+    #[serde(default)]
+    pub n_validation: usize,
+    /// Rows in the final test window (never used by selection; 0 when `test_fraction` is 0).
+    #[serde(default)]
+    pub n_test: usize,
     /// Rows dropped for missing gauge values.
     pub dropped_missing: usize,
     /// Gauge cells imputed.
     pub imputed: usize,
-    /// Day at which the held-out window starts (days since the first row).
+    /// Day at which the validation window starts (days since the first row).
     pub split_day: f64,
+    /// Day at which the test window starts (`None` without one).
+    #[serde(default)]
+    pub test_start_day: Option<f64>,
+    /// Days of the rolling-origin evaluation origins (the first is `split_day`).
+    #[serde(default)]
+    pub selection_origin_days: Vec<f64>,
+    /// Which rows `heldout_rmse_*` are computed on: `test` (the final test window, never used
+    /// by selection) or `validation` (when `test_fraction` is 0; selection saw those rows).
+    #[serde(default)]
+    pub error_window: String,
     /// White-noise sd estimated from first differences of the initial residuals (microstrain).
     pub noise_sd_estimate: f64,
     /// Accepted effects in order, with final parameters.
     pub effects: Vec<EffectReport>,
-    /// Held-out RMSE per gauge before the loop (microstrain).
+    /// RMSE per gauge before the loop on the error window ([`Self::error_window`]: the
+    /// test window; microstrain).
     pub heldout_rmse_before: Vec<f64>,
-    /// Held-out RMSE per gauge after the loop (microstrain).
+    /// RMSE per gauge after the loop on the error window, with every accepted effect fitted
+    /// on all rows before it (microstrain).
     pub heldout_rmse_after: Vec<f64>,
-    /// Held-out RMSE over all gauges before (microstrain).
+    /// RMSE over all gauges before, on the error window (microstrain).
     pub heldout_rmse_total_before: f64,
-    /// Held-out RMSE over all gauges after (microstrain).
+    /// RMSE over all gauges after, on the error window (microstrain).
     pub heldout_rmse_total_after: f64,
     /// θ (in) of the first calibration.
     pub theta_before: ThetaSummary,
@@ -207,9 +248,11 @@ pub struct CloseLoopReport {
     pub theta_after: ThetaSummary,
     /// What `theta_after` refers to.
     pub theta_after_basis: String,
-    /// Adequacy of the initial residuals (calibration, held-out).
+    /// Adequacy of the initial residuals (calibration, validation, test windows).
     pub checks_before: Vec<Adequacy>,
-    /// Adequacy of the final residuals (calibration, held-out).
+    /// Adequacy of the final residuals: calibration and validation windows as selection saw
+    /// them (validation: cross-validated residual), the test window with the effects fitted
+    /// on all rows before it.
     pub checks_after: Vec<Adequacy>,
     /// Every step.
     pub steps: Vec<StepReport>,
@@ -240,7 +283,7 @@ pub struct CloseLoopOutcome {
     pub residual_before: DMatrix<f64>,
     /// Residuals after the loop.
     pub residual_after: DMatrix<f64>,
-    /// Held-out row indices.
+    /// Rows of the error window (the test window, or the validation window without one).
     pub heldout_rows: Vec<usize>,
     /// Feature names and values, for plotting residuals against covariates.
     pub features: Vec<(String, Vec<f64>)>,
@@ -276,30 +319,24 @@ pub fn close_loop_with(
             ),
         ));
     }
-    let n = rec.len();
-    let n_cal = (cfg.calibration_fraction * n as f64).round() as usize;
-    if n_cal < 30 || n - n_cal < 30 {
-        return Err(BamudiError::TooFewRows {
-            what: "calibration and held-out windows (30 each)".into(),
-            got: n,
-        });
-    }
-    let cal: Vec<usize> = (0..n_cal).collect();
-    let ho: Vec<usize> = (n_cal..n).collect();
+    let w = Windows::of(rec, cfg)?;
     let feats = Features::new(rec, cfg.load.as_ref());
     let lp = Loop {
         calibrator,
         x: &rec.x,
         y: &rec.y,
         feats: &feats,
-        cal: &cal,
-        ho: &ho,
+        cal: &w.cal,
+        val: &w.validation,
+        sel: &w.selection,
+        test: &w.test,
+        folds: &w.folds,
         gauges: &rec.gauge_names,
         cfg,
         nuisance: cfg
             .load
             .as_ref()
-            .and_then(|l| LoadNuisance::new(&rec.x, l, &cal)),
+            .and_then(|l| LoadNuisance::new(&rec.x, l, &w.cal)),
     };
     let (model, mean, var) = lp.calibrate(lp.y)?;
     let mut before = Before::of(&lp, model.theta_summary(), &mean, &var);
@@ -317,8 +354,53 @@ pub fn close_loop_with(
         steps,
         conclusion,
     };
-    outcome(&lp, rec, n_cal, run)
+    outcome(&lp, rec, run)
 }
+
+/// The record's rows in time order: the calibration window, the validation window (cut into
+/// rolling-origin folds) and the final test window that selection never sees.
+struct Windows {
+    cal: Vec<usize>,
+    validation: Vec<usize>,
+    selection: Vec<usize>,
+    test: Vec<usize>,
+    /// `(origin, end)` of each fold: fitted on rows `0..origin`, scored on `origin..end`.
+    folds: Vec<(usize, usize)>,
+}
+
+impl Windows {
+    fn of(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Result<Self> {
+        let n = rec.len();
+        let n_cal = (cfg.calibration_fraction * n as f64).round() as usize;
+        let n_test = (cfg.test_fraction * n as f64).round() as usize;
+        let n_sel = n.saturating_sub(n_test);
+        if n_cal < 30 || n_sel < n_cal + 30 || (cfg.test_fraction > 0.0 && n_test < 30) {
+            return Err(BamudiError::TooFewRows {
+                what: format!(
+                    "calibration, validation and test windows (30 rows each; calibration_fraction {}, test_fraction {})",
+                    cfg.calibration_fraction, cfg.test_fraction
+                ),
+                got: n,
+            });
+        }
+        // folds of at least MIN_FOLD_ROWS rows, so that each scores a stretch of the record
+        let k = cfg
+            .selection_origins
+            .min((n_sel - n_cal) / MIN_FOLD_ROWS)
+            .max(1);
+        let origin = |j: usize| n_cal + (j * (n_sel - n_cal)) / k;
+        Ok(Self {
+            cal: (0..n_cal).collect(),
+            validation: (n_cal..n_sel).collect(),
+            selection: (0..n_sel).collect(),
+            test: (n_sel..n).collect(),
+            folds: (0..k).map(|j| (origin(j), origin(j + 1))).collect(),
+        })
+    }
+}
+
+/// Fewest validation rows a rolling-origin fold scores (a day of hourly data).
+const MIN_FOLD_ROWS: usize = 24;
 
 /// A finished run of the loop.
 struct Run {
@@ -348,9 +430,11 @@ impl Before {
             })
             .collect();
         noise.sort_by(|a, b| a.total_cmp(b));
+        let mut checks = windows(lp, &r0, &r0, var);
+        checks.extend(test_window(lp, &r0, var));
         Self {
-            checks: windows(lp, &r0, var).to_vec(),
-            rmse: rmse_per_column(&r0, lp.ho),
+            checks,
+            rmse: rmse_per_column(&r0, lp.error_rows()),
             noise_sd: noise[noise.len() / 2],
             theta,
             adequacy: None,
@@ -359,20 +443,38 @@ impl Before {
     }
 }
 
-/// The adequacy checks of the calibration and held-out windows.
-fn windows(lp: &Loop<'_>, r: &DMatrix<f64>, var: &DMatrix<f64>) -> [Adequacy; 2] {
-    let th = CheckThresholds {
+/// The thresholds of the adequacy checks.
+fn thresholds(lp: &Loop<'_>) -> CheckThresholds {
+    CheckThresholds {
         ljung_box_lags: lp.cfg.ljung_box_lags,
         significance: lp.cfg.significance,
-    };
-    [
+    }
+}
+
+/// The adequacy checks selection may look at: the calibration window on the residual `r`
+/// (effects fitted there) and the validation window on the cross-validated residual `r_cv`.
+fn windows(
+    lp: &Loop<'_>,
+    r: &DMatrix<f64>,
+    r_cv: &DMatrix<f64>,
+    var: &DMatrix<f64>,
+) -> Vec<Adequacy> {
+    let th = thresholds(lp);
+    vec![
         adequacy("calibration", r, var, lp.cal, lp.gauges, lp.feats, &th),
-        adequacy("heldout", r, var, lp.ho, lp.gauges, lp.feats, &th),
+        adequacy("validation", r_cv, var, lp.val, lp.gauges, lp.feats, &th),
     ]
 }
 
+/// The adequacy checks of the final test window (reported only; `None` without one).
+fn test_window(lp: &Loop<'_>, r: &DMatrix<f64>, var: &DMatrix<f64>) -> Option<Adequacy> {
+    let th = thresholds(lp);
+    (!lp.test.is_empty()).then(|| adequacy("test", r, var, lp.test, lp.gauges, lp.feats, &th))
+}
+
 /// The loop's steps until the checks pass, nothing improves or the step budget is spent;
-/// returns the step reports and the conclusion.
+/// returns the step reports and the conclusion. Decisions use the calibration and validation
+/// windows only.
 fn run_steps(
     lp: &Loop<'_>,
     st: &mut State,
@@ -380,8 +482,9 @@ fn run_steps(
 ) -> Result<(Vec<StepReport>, String)> {
     let mut steps = vec![];
     for step in 1..=lp.cfg.max_steps {
-        let r = lp.residual(st)?;
-        let checks = windows(lp, &r, &st.var);
+        let fold_r = lp.fold_residuals(st)?;
+        let r_cv = lp.cv_of(&fold_r);
+        let checks = windows(lp, &fold_r[0], &r_cv, &st.var);
         if checks.iter().all(Adequacy::passed) && !model_inadequate(st) {
             let c = if st.effects.is_empty() {
                 "no missing effect found: residuals pass every adequacy check"
@@ -390,15 +493,15 @@ fn run_steps(
             };
             return Ok((steps, c.into()));
         }
-        let mse_before = mse_rows(&r, lp.ho);
-        let (candidates, outcome) = lp.search(st, library, &r, mse_before)?;
+        let mse_before = mse_rows(&r_cv, lp.val);
+        let (candidates, outcome) = lp.search(st, library, &fold_r, mse_before)?;
         let mut report = StepReport {
             step,
             heldout_mse_before: mse_before,
             candidates,
             accepted: None,
             decision: outcome.decision.clone(),
-            heldout_rmse_after: rmse_per_column(&r, lp.ho),
+            heldout_rmse_after: rmse_per_column(&r_cv, lp.val),
             theta_after: search::theta_now(st).0,
         };
         let Some((next, name, decision)) = outcome.accepted else {
@@ -408,7 +511,7 @@ fn run_steps(
         *st = next;
         report.accepted = Some(name);
         report.decision = decision;
-        report.heldout_rmse_after = rmse_per_column(&lp.residual(st)?, lp.ho);
+        report.heldout_rmse_after = rmse_per_column(&lp.cv_residual(st)?, lp.val);
         report.theta_after = search::theta_now(st).0;
         steps.push(report);
     }
@@ -498,10 +601,14 @@ fn whole_record(
     rec: &MeasuredRecord,
     st: &State,
     r_final: &DMatrix<f64>,
-    n_cal: usize,
 ) -> Result<(Option<EventScan>, Option<ThetaTrack>)> {
     let events = match lp.cfg.event_scan.enabled {
-        true => Some(events::scan(rec, r_final, n_cal, &lp.cfg.event_scan)?),
+        true => Some(events::scan(
+            rec,
+            r_final,
+            lp.sel.len(),
+            &lp.cfg.event_scan,
+        )?),
         false => None,
     };
     let track = match lp.cfg.track.enabled {
@@ -535,46 +642,119 @@ fn track_theta(
     track::track(&input, &lp.cfg.track)
 }
 
-/// Assembles the outcome of a finished run.
-fn outcome(
-    lp: &Loop<'_>,
-    rec: &MeasuredRecord,
-    n_cal: usize,
-    run: Run,
-) -> Result<CloseLoopOutcome> {
+/// `θ` after the loop and what it refers to: the track's `θ` now when a parameter trend was
+/// accepted, else the effects' or the last calibration's.
+fn theta_after(st: &State, track: Option<&ThetaTrack>) -> (ThetaSummary, String) {
+    match track {
+        Some(t) if st.model_fixed() => (
+            t.now,
+            "the parameter at the end of the record from its track over the whole record (Kalman filter at the last window)".to_string(),
+        ),
+        _ => search::theta_now(st),
+    }
+}
+
+/// The state selection chose, made final.
+struct Final {
+    /// Its effects re-fitted on every row selection used.
+    st: State,
+    /// Its residual at every row.
+    residual: DMatrix<f64>,
+    /// RMSE per gauge on the error window: the test window, or without one the validation
+    /// window's cross-validated residual (the re-fitted effects have seen those rows).
+    rmse: Vec<f64>,
+    /// The calibration and validation windows as selection saw them, then the test window.
+    checks: Vec<Adequacy>,
+}
+
+fn final_state(lp: &Loop<'_>, mut st: State) -> Result<Final> {
+    let fold_r = lp.fold_residuals(&st)?;
+    let r_cv = lp.cv_of(&fold_r);
+    let mut checks = windows(lp, &fold_r[0], &r_cv, &st.var);
+    let (residual, refitted) = match st.effects.is_empty() {
+        true => (fold_r[0].clone(), vec![]),
+        false => lp.refit(&st, lp.sel)?,
+    };
+    st.effects = refitted;
+    checks.extend(test_window(lp, &residual, &st.var));
+    let rmse = match lp.test.is_empty() {
+        true => rmse_per_column(&r_cv, lp.val),
+        false => rmse_per_column(&residual, lp.test),
+    };
+    Ok(Final {
+        st,
+        residual,
+        rmse,
+        checks,
+    })
+}
+
+/// The report's description of the loop's windows.
+fn window_fields(lp: &Loop<'_>, rec: &MeasuredRecord) -> WindowFields {
+    let day = |i: usize| rec.time_h[i] / 24.0;
+    WindowFields {
+        n_validation: lp.val.len(),
+        n_test: lp.test.len(),
+        split_day: day(lp.cal.len()),
+        test_start_day: lp.test.first().map(|&i| day(i)),
+        selection_origin_days: lp.folds.iter().map(|&(o, _)| day(o)).collect(),
+        error_window: match lp.test.is_empty() {
+            true => "validation".into(),
+            false => "test".into(),
+        },
+    }
+}
+
+/// The loop's windows as the report states them (see [`CloseLoopReport`]'s fields).
+struct WindowFields {
+    n_validation: usize,
+    n_test: usize,
+    split_day: f64,
+    test_start_day: Option<f64>,
+    selection_origin_days: Vec<f64>,
+    error_window: String,
+}
+
+/// Assembles the outcome of a finished run: the selection's checks on the state it chose,
+/// then every accepted effect re-fitted on all the rows selection used and the error on the
+/// test window that selection never saw.
+fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOutcome> {
     let Run {
         before,
         st,
         steps,
         conclusion,
     } = run;
-    let r_final = lp.residual(&st)?;
-    let checks_after = windows(lp, &r_final, &st.var).to_vec();
-    let (events, theta_track) = whole_record(lp, rec, &st, &r_final, n_cal)?;
-    let (theta_after, basis) = match &theta_track {
-        Some(t) if st.model_fixed() => (
-            t.now,
-            "the parameter at the end of the record from its track over the whole record (Kalman filter at the last window)".to_string(),
-        ),
-        _ => search::theta_now(&st),
-    };
+    let Final {
+        st,
+        residual: r_final,
+        rmse: rmse_after,
+        checks: checks_after,
+    } = final_state(lp, st)?;
+    let (events, theta_track) = whole_record(lp, rec, &st, &r_final)?;
+    let (theta_after, basis) = theta_after(&st, theta_track.as_ref());
     let conclusion = with_alarms(
         conclusion,
         events.as_ref(),
         theta_track.as_ref(),
         &lp.cfg.output_unit,
     );
-    let rmse_after = rmse_per_column(&r_final, lp.ho);
     let total = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let w = window_fields(lp, rec);
     let report = CloseLoopReport {
         file: rec.file.clone(),
         gauge_names: rec.gauge_names.clone(),
         n_rows: rec.len(),
         n_calibration: lp.cal.len(),
-        n_heldout: lp.ho.len(),
+        n_heldout: w.n_validation + w.n_test,
+        n_validation: w.n_validation,
+        n_test: w.n_test,
         dropped_missing: rec.dropped_missing,
         imputed: rec.imputed,
-        split_day: rec.time_h[n_cal] / 24.0,
+        split_day: w.split_day,
+        test_start_day: w.test_start_day,
+        selection_origin_days: w.selection_origin_days,
+        error_window: w.error_window,
         noise_sd_estimate: before.noise_sd,
         effects: st.effects.iter().map(|e| e.report.clone()).collect(),
         heldout_rmse_total_before: total(&before.rmse),
@@ -598,7 +778,7 @@ fn outcome(
         model: Arc::clone(&st.model),
         residual_before: before.residual,
         residual_after: r_final,
-        heldout_rows: lp.ho.to_vec(),
+        heldout_rows: lp.error_rows().to_vec(),
         features: lp
             .feats
             .names

@@ -127,7 +127,7 @@ pub struct CovariateCorrelation {
 /// All adequacy checks of one window.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Adequacy {
-    /// Window name (`calibration` or `heldout`).
+    /// Window name (`calibration`, `validation` or `test`).
     pub window: String,
     /// Number of rows.
     pub n: usize,

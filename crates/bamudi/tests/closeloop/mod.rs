@@ -54,8 +54,8 @@ fn noise_alone_adds_no_effect() {
     }
 }
 
-/// Events the loop cannot fit because they start after its calibration window (the newest
-/// data an operator cares about), in shapes and sizes outside the effect library's forms: a
+/// Events the loop cannot fit because they start in its last rolling-origin fold or in the
+/// final test window (the newest data an operator cares about), in shapes and sizes outside the effect library's forms: a
 /// re-zero in the last 30 hours, a smaller step at 90 % of the record, and a debond that creeps
 /// over a day to a plateau (its onset is the start of the creep). The scan must name the right
 /// gauge, put the true onset (for the creep: some hour of it) inside its 95 % interval, hold the
@@ -90,11 +90,15 @@ fn events_in_the_newest_data_are_found_dated_and_sized() {
             lo * 24.0 <= end && start <= hi * 24.0
         });
         let a = hit.unwrap_or_else(|| panic!("{name}: no alarm dated at the onset: {alarms:?}"));
-        assert_eq!(
-            a.window,
-            bamudi::closeloop::AlarmWindow::Heldout,
-            "{name}: {a:?}"
-        );
+        // the label follows the loop's windows (test window from day 36 of 45): the re-zero
+        // and the step start in it; the creep (day 33.3) starts in the last rolling-origin fold
+        // of the validation window, which selection cannot fit either
+        let test_start_h = r.test_start_day.expect("a test window by default") * 24.0;
+        let window = match start >= test_start_h {
+            true => bamudi::closeloop::AlarmWindow::Test,
+            false => bamudi::closeloop::AlarmWindow::Selection,
+        };
+        assert_eq!(a.window, window, "{name}: {a:?}");
         // the creep's ramp is segmented too, so its size is checked against the whole step
         // only when a single alarm covers it
         if alarms.len() == 1 {
@@ -108,6 +112,67 @@ fn events_in_the_newest_data_are_found_dated_and_sized() {
         );
         assert!(r.conclusion.contains(&want), "{name}: {}", r.conclusion);
     }
+}
+
+/// Selection never sees the test window: two records equal up to the test window (the last
+/// 20 %, from row 864 of 1080) and different in it (a +5 microstrain step on g5 at hour 950 in
+/// one of them) give the same steps, decisions, accepted effects and parameters, and the same
+/// `θ`; only the error reported on the test window and the alarms differ. A loop that looked
+/// at the test window while selecting would see the step and decide differently.
+#[test]
+fn selection_never_sees_the_test_window() {
+    let drift = |t: f64, g: usize| if g == 2 { 0.25 * t / 24.0 } else { 0.0 };
+    let a = run(5, drift);
+    let b = run(5, move |t, g| {
+        drift(t, g) + if g == 4 && t >= 950.0 { 5.0 } else { 0.0 }
+    });
+    let (ra, rb) = (&a.report, &b.report);
+    assert_eq!(ra.error_window, "test");
+    assert_eq!(
+        (ra.n_calibration, ra.n_validation, ra.n_test),
+        (648, 216, 216)
+    );
+    assert_eq!(ra.selection_origin_days, vec![27.0, 30.0, 33.0]);
+    assert_eq!(json(&ra.steps), json(&rb.steps));
+    assert_eq!(json(&ra.effects), json(&rb.effects));
+    assert_eq!(json(&ra.theta_after), json(&rb.theta_after));
+    assert_eq!(ra.effects[0].name, "gauge_drift");
+    // the step in b's test window is in its error and among its alarms, not in its selection
+    assert!(rb.heldout_rmse_after[4] > ra.heldout_rmse_after[4] + 1.0);
+    let alarms = &rb.events.as_ref().unwrap().alarms;
+    assert!(
+        alarms
+            .iter()
+            .any(|x| x.gauge == "g5" && x.window == bamudi::closeloop::AlarmWindow::Test),
+        "{alarms:?}"
+    );
+}
+
+/// Without a test window the error is reported on the validation window, and there it is the
+/// cross-validated error (each row predicted from its fold's origin), not the error of the
+/// effects re-fitted on those rows.
+#[test]
+fn without_a_test_window_the_error_is_cross_validated() {
+    let gate = ToyGate::default();
+    let rec = record_with(
+        &gate,
+        ROWS,
+        5,
+        |t, g| if g == 2 { 0.25 * t / 24.0 } else { 0.0 },
+    )
+    .unwrap();
+    let cfg = config().test_fraction(0.0);
+    let out = close_loop(&rec, &GridCalibrator::new(gate, GAP_BOUNDS), &cfg).unwrap();
+    let r = &out.report;
+    assert_eq!((r.error_window.as_str(), r.n_test), ("validation", 0));
+    assert_eq!(r.effects[0].name, "gauge_drift");
+    let last = r.steps.last().expect("a drift is found in a step");
+    assert_eq!(r.heldout_rmse_after, last.heldout_rmse_after);
+}
+
+/// A report part as JSON, to compare parts by value.
+fn json<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_string(v).expect("report parts serialise")
 }
 
 #[test]

@@ -92,6 +92,8 @@ samples = 50\n";
 /// Every `CloseLoopConfig` key (the CLI replaces `load` with the gate's head, but the file
 /// may give it).
 const CLOSE_LOOP_FULL: &str = "calibration_fraction = 0.6\n\
+test_fraction = 0.2\n\
+selection_origins = 3\n\
 max_steps = 4\n\
 min_relative_improvement = 0.05\n\
 temperature_columns = [\"air_temp_f\", \"water_temp_f\"]\n\

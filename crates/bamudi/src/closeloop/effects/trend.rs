@@ -7,9 +7,10 @@ use crate::error::Result;
 use nalgebra::DMatrix;
 use std::sync::Arc;
 
-/// `θ(t)` tracked through the calibration window ([`crate::closeloop::ThetaTrack`]: window
-/// estimates of `θ`, a local linear trend over them by Kalman filter and smoother) and carried
-/// past it along the last filtered level and slope. No straight line or other form is imposed:
+/// `θ(t)` tracked through the rows the effect is fitted on (the rows before an evaluation
+/// origin; [`crate::closeloop::ThetaTrack`]: window estimates of `θ`, a local linear trend
+/// over them by Kalman filter and smoother) and carried past them along the last filtered
+/// level and slope. No straight line or other form is imposed:
 /// a gap that grows, accelerates or opens in one go is followed as it is. The term is relative
 /// to the calibrated model (`g(x, θ(t)) − g(x, θ̂)`), so the loop keeps the model fixed once it
 /// is accepted.
@@ -107,7 +108,7 @@ impl Effect for ParameterTrend {
                 vec![term.knots[0].1],
             ),
             param(
-                &format!("{pn}_rate_at_end_of_calibration"),
+                &format!("{pn}_rate_at_end_of_fit"),
                 "parameter units/day",
                 vec![t.state_now.slope],
             ),

@@ -118,6 +118,20 @@ pub struct TrackAlarm {
 }
 
 /// The parameter tracked through the record.
+///
+/// ```
+/// use bamudi::closeloop::{CloseLoopConfig, close_loop};
+/// use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with};
+/// let gate = ToyGate::default();
+/// let rec = record_with(&gate, 720, 4, |_, _| 0.0).unwrap(); // 30 days, gap 90 in throughout
+/// let calibrator = GridCalibrator::new(gate, (40.0, 200.0));
+/// let out = close_loop(&rec, &calibrator, &CloseLoopConfig::default()).unwrap();
+/// let track = out.report.theta_track.expect("the track runs by default");
+/// assert_eq!(track.points.len(), 30); // one per daily window
+/// let (lo, hi) = track.now.ci95;
+/// assert!(lo <= 90.0 && 90.0 <= hi && hi - lo < 2.0); // the gap now, with its interval
+/// assert!(track.alarm.is_none()); // a constant gap raises no change alarm
+/// ```
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ThetaTrack {
     /// The settings used.
