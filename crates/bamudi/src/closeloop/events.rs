@@ -1,10 +1,9 @@
 //! The whole-record event scan: changes of level in every gauge's final residual, found over
 //! the whole record (the newest days included), dated with an interval and sized.
 //!
-//! The loop fits and selects effects on time windows, so an event that starts after the
-//! calibration window (a gauge re-zeroed, a debond, a shifted support) is not fitted: an
-//! effect must be visible in the calibration window to be a candidate, and a change of the
-//! gap needs two rolling-origin folds after it.
+//! The loop fits and selects effects on time windows and needs two rolling-origin folds to
+//! accept one, so an event that starts in its last fold or in the test window (a gauge
+//! re-zeroed, a debond, a shifted support) is not fitted.
 //! The scan does not fit anything: it segments each gauge's residual (data − calibrated model −
 //! accepted effects) by [`numerics::changepoint`] (PELT, modified BIC, a robust AR(1)
 //! long-run noise scale per gauge) and reports every change it finds as an [`Alarm`]. An alarm
@@ -286,7 +285,7 @@ fn reading(window: AlarmWindow, others: usize) -> String {
     };
     let when = match window {
         AlarmWindow::Selection => {
-            "inside the rows selection used and not explained by the accepted effects (an event after the calibration window is not fitted)"
+            "inside the rows selection used and not explained by the accepted effects (an event in the last rolling-origin fold is not fitted)"
         }
         AlarmWindow::Split => {
             "at the start of the test window: the model and effects fitted before it may not predict the later data at this level, or an event happened then"

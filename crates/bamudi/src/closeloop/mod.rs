@@ -346,6 +346,7 @@ pub fn close_loop_with(
         mean,
         var,
         effects: vec![],
+        from_fold: vec![],
     };
     let (steps, conclusion) = run_steps(&lp, &mut st, library)?;
     let run = Run {
@@ -673,7 +674,7 @@ fn final_state(lp: &Loop<'_>, mut st: State) -> Result<Final> {
     let mut checks = windows(lp, &fold_r[0], &r_cv, &st.var);
     let (residual, refitted) = match st.effects.is_empty() {
         true => (fold_r[0].clone(), vec![]),
-        false => lp.refit(&st, lp.sel)?,
+        false => lp.refit(&st, lp.sel, true)?,
     };
     st.effects = refitted;
     checks.extend(test_window(lp, &residual, &st.var));

@@ -170,6 +170,33 @@ fn without_a_test_window_the_error_is_cross_validated() {
     assert_eq!(r.heldout_rmse_after, last.heldout_rmse_after);
 }
 
+/// A step that starts after the calibration window (day 27 of 45) but early in the validation
+/// window — +5 microstrain on g4 at hour 700 (day 29.2), in the first rolling-origin fold — is
+/// fitted at the later origins, named, dated and sized, and leaves the noise on the test
+/// window (days 36-45). With one held-out window the loop could not fit it at all.
+#[test]
+fn a_step_early_in_the_validation_window_is_fitted() {
+    let out = run(6, |t, g| if g == 3 && t >= 700.0 { 5.0 } else { 0.0 });
+    let r = &out.report;
+    assert_eq!(
+        r.effects.first().map(|e| e.name.as_str()),
+        Some("gauge_offset_jump"),
+        "{:?}",
+        r.steps.iter().map(|s| &s.decision).collect::<Vec<_>>()
+    );
+    let p = &r.effects[0].parameters;
+    let (day, size) = (p[1].values[3], p[2].values[3]);
+    // a day is 24 rows; the step is 5 noise sd, so its day is found to within an hour or two
+    assert!((day - 700.0 / 24.0).abs() < 0.1, "jump day {day}");
+    assert!((size - 5.0).abs() < 0.5, "jump size {size}");
+    // 1.5 x the noise: the test-window RMSE of 7 gauges with a fitted term is a little above 1
+    assert!(
+        r.heldout_rmse_total_after < 1.5,
+        "{}",
+        r.heldout_rmse_total_after
+    );
+}
+
 /// A report part as JSON, to compare parts by value.
 fn json<T: serde::Serialize>(v: &T) -> String {
     serde_json::to_string(v).expect("report parts serialise")
