@@ -141,6 +141,7 @@ fn fe_gate_an_event_in_the_last_days_is_an_alarm() {
         a.size_interval.0 <= size && size <= a.size_interval.1,
         "{a:?}"
     );
+    // `Test` (was `Heldout`): the alarm labels now follow the test window (from day 48)
     assert_eq!(a.window, bamudi::closeloop::AlarmWindow::Test);
     assert!(
         !r.conclusion.starts_with("no missing effect"),
