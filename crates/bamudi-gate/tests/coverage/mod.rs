@@ -1,7 +1,9 @@
-//! The quick coverage study (`cargo xtask coverage --quick`) as a test: 40 replicate data sets
-//! per scenario, each with `θ*` drawn from the prior, fresh water levels and gauge noise and the
+//! A quick coverage study as a test: 40 replicate data sets per scenario, each with `θ*` drawn
+//! from the prior (simulation-based calibration), fresh water levels and gauge noise and the
 //! paper's discrepancy (Eq. 53-54, a shape the calibration's basis does not contain), on the
-//! 24-in mesh with the exact estimator, calibrated in the default (marginal) mode.
+//! 24-in mesh with the exact estimator, calibrated in the default (marginal) mode — with 60
+//! experiments per data set, half of `cargo xtask coverage --quick` (120), so that the test takes
+//! 197 s instead of 444 s on 2 cores (issue 20).
 //!
 //! The claim tested is the nominal level of the 95 % `θ` interval: the number of replicates
 //! whose interval holds `θ*` must lie in the 1 % binomial acceptance region of p = 0.95 for
@@ -9,12 +11,18 @@
 //! intervals half as wide (a Gaussian posterior's central 67.3 % interval) must fail, so the
 //! test has the power to see over-confidence of that size.
 //!
-//! Measured with this seed (`cargo xtask coverage --quick`): 36/40 and 40/40 hits; half-width
-//! intervals 23/40 and 28/40. The default prior (Matérn 5/2, shared scales, support mask) was chosen
-//! over the squared exponential on this seed and on three other discrepancy shapes
-//! (docs/results/coverage-shapes.md lists them all); with the squared exponential scenario 1 scored
-//! 32/40 and this test failed. It is therefore not an independent confirmation: the paper-size
-//! study (another seed, 500 experiments) is. What this test guards is regressions.
+//! At 120 experiments (`cargo xtask coverage --quick`, seed 2021) the study scores 36/40 and
+//! 40/40; half-width intervals 23/40 and 28/40. The default prior (Matérn 5/2, shared scales,
+//! support mask) was chosen over the squared exponential at that size and seed and on three other
+//! discrepancy shapes (docs/results/coverage-shapes.md lists them all); with the squared
+//! exponential scenario 1 scored 32/40 and the test failed. The size here, 60 experiments, was
+//! not used in that choice; the seed was, and the replicates' `θ*` draws are shared with it. The
+//! size was set before the test was first run at it. Measured at 60 (`--nocapture`): 35/40 and
+//! 38/40, half-width intervals 23/40 and 30/40; not asserted, and worth knowing: scenario 1's
+//! 50 % intervals held `θ*` 28 % of the time and its SBC uniformity p is 0.000 (the centre of the
+//! posterior is over-confident at this size even where the 95 % level holds). What this test
+//! guards is regressions; the paper-size study (another seed, 500 experiments) is the
+//! independent check.
 
 use bamudi::validation::{Coverage, binomial_acceptance};
 use bamudi_gate::coverage::{self, CoverageOptions, ScenarioCoverage};
@@ -33,7 +41,10 @@ fn hits(s: &ScenarioCoverage, level: f64) -> Coverage {
 
 #[test]
 fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
-    let opts = CoverageOptions::quick();
+    let opts = CoverageOptions {
+        n_experiments: 60,
+        ..CoverageOptions::quick()
+    };
     let report = coverage::run(&opts, &|_, _| {}).unwrap();
     let region = binomial_acceptance(opts.n_replicates, 0.95, ALPHA).unwrap();
     assert_eq!(
