@@ -5,9 +5,9 @@
 //! switched on.
 //!
 //! The record and the calibrator are half the library's default size so that the six records
-//! take about 4.5 min of CI instead of 13 (`record_config`, `test_calibrator`; measured on 2
-//! cores with the test binary's `--report-time`). Before the change all six passed at full size
-//! too; the bounds below were not changed with it.
+//! take 4.6 min instead of about 13 (`record_config`, `test_calibrator`; the six alone on 2
+//! cores, `cargo test -p bamudi-gate --test lib fe_gate`: 274.6 s). Before the change all six
+//! passed at full size too; the bounds below were not changed with it.
 
 use super::*;
 use bamudi::closeloop::EffectReport;
