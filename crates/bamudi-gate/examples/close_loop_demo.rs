@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             calls: Mutex::new((0, 0.0)),
         };
         let data = gate::as_measured(&rec, calibrator.inner.model(), "simulated.csv")?;
-        let cfg = gate::close_loop_config(CloseLoopConfig::default());
+        let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
         let out = close_loop(&data, &calibrator, &cfg)?;
         let (calls, cal_s) = *calibrator.calls.lock().unwrap_or_else(|e| e.into_inner());
         let r = &out.report;

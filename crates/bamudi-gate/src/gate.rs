@@ -113,8 +113,18 @@ pub fn check_record(rec: &MeasuredRecord, model: &GateMultiLevel) -> Result<()> 
 }
 
 /// The close loop on a gate record: the head `h_up − h_down` as the load (the gate is open
-/// below [`mitergate::MIN_HEAD_IN`]), the gap as the parameter, strains in microstrain.
-pub fn close_loop_config(base: CloseLoopConfig) -> CloseLoopConfig {
+/// below [`mitergate::MIN_HEAD_IN`]), the gap as the parameter, strains in microstrain, and
+/// the units of the field layout's covariates ([`COVARIATE_UNITS`](mitergate::data::field::COVARIATE_UNITS))
+/// for those `rec` has and `base` does not declare itself.
+pub fn close_loop_config(base: CloseLoopConfig, rec: &MeasuredRecord) -> CloseLoopConfig {
+    let mut base = base;
+    for (column, unit) in mitergate::data::field::COVARIATE_UNITS {
+        if rec.covariate_names.iter().any(|c| c == column)
+            && !base.column_units.contains_key(column)
+        {
+            base = base.column_unit(column, unit);
+        }
+    }
     base.load(LoadSpec::difference(
         "head",
         0,

@@ -107,6 +107,7 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
         ingest.missing = MissingPolicy::Interpolate;
     }
     let rec = gate::read_record(&c.data, model, &ingest)?;
+    let cfg = gate::close_loop_config(cfg, &rec);
     let out = close_loop(&rec, &calibrator, &cfg)?;
     let inputs = ReportInputs {
         config: c
@@ -163,8 +164,9 @@ fn loop_fatigue(out: &CloseLoopOutcome, rec: &MeasuredRecord, seed: u64) -> Resu
         .context("the quoin block's fatigue over the record")
 }
 
-/// The loop's settings: the configuration file (or the defaults), the hold-out override and
-/// the gate's load, parameter and unit.
+/// The loop's settings: the configuration file (or the defaults) and the hold-out override
+/// (the gate's load, parameter, units and the record's column units are added once the record
+/// is read).
 fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
     let cfg: CloseLoopConfig = match &c.config {
         Some(p) => {
@@ -193,7 +195,7 @@ fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
         None => cfg,
     };
     cfg.validate()?;
-    Ok(gate::close_loop_config(cfg))
+    Ok(cfg)
 }
 
 /// The `--calibration-config` file, read and checked.

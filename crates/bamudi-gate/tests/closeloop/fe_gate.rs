@@ -66,7 +66,7 @@ fn run_fe_with(preset: &str, fx: FieldEffects, seed: u64) -> CloseLoopOutcome {
     let rec = gate::simulate_field(&record_config(seed, fx), c).unwrap();
     let calibrator = test_calibrator(c);
     let data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
-    let cfg = gate::close_loop_config(CloseLoopConfig::default());
+    let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
     let out = close_loop(&data, &calibrator, &cfg).unwrap();
     let r = &out.report;
     eprintln!(

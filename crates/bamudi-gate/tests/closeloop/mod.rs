@@ -4,11 +4,14 @@
 
 mod events;
 mod fe_gate;
+mod features;
 mod scenarios;
 mod track;
 
 use bamudi::closeloop::testing::{GridCalibrator, ToyGate, toy_load};
-use bamudi::closeloop::{CloseLoopConfig, CloseLoopOutcome, IngestConfig, close_loop, parse_csv};
+use bamudi::closeloop::{
+    CloseLoopConfig, CloseLoopOutcome, IngestConfig, MeasuredRecord, close_loop, parse_csv,
+};
 use mitergate::data::field::{FieldConfig, FieldEffects, FieldRecord, simulate};
 
 /// Gap prior of the test calibrator (in), wide enough for every scenario.
@@ -28,7 +31,7 @@ pub fn run(rec: &FieldRecord) -> CloseLoopOutcome {
     close_loop(
         &data,
         &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
-        &toy_config(),
+        &toy_config(&data),
     )
     .unwrap()
 }
@@ -39,10 +42,17 @@ pub fn base(seed: u64, effects: FieldEffects) -> FieldConfig {
 }
 
 /// The loop's settings for the gate-like test model: the head as the load, the gap as the
-/// parameter (as `bamudi_gate::gate::close_loop_config` sets them for the real gate).
-pub fn toy_config() -> CloseLoopConfig {
-    CloseLoopConfig::default()
+/// parameter and the field layout's column units (as `bamudi_gate::gate::close_loop_config`
+/// sets them for the real gate).
+pub fn toy_config(rec: &MeasuredRecord) -> CloseLoopConfig {
+    let mut cfg = CloseLoopConfig::default()
         .load(toy_load())
         .parameter_name("gap")
-        .output_unit("microstrain")
+        .output_unit("microstrain");
+    for (column, unit) in mitergate::data::field::COVARIATE_UNITS {
+        if rec.covariate_names.iter().any(|c| c == column) {
+            cfg = cfg.column_unit(column, unit);
+        }
+    }
+    cfg
 }

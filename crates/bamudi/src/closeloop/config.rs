@@ -2,6 +2,7 @@
 
 use crate::error::BamudiError;
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 
 /// A scalar load of the model inputs, `Σ_j weights_j x_j` (a gate's head `h_up − h_down`),
 /// with the input that completes it to a coordinate pair (the gate's lower level) and the
@@ -95,9 +96,17 @@ pub struct CloseLoopConfig {
     pub max_steps: usize,
     /// Minimum relative reduction of the cross-validated mean square error to accept an effect [0.05].
     pub min_relative_improvement: f64,
-    /// Temperature columns for the thermal effect; `None` = every column whose name contains
-    /// `temp` [None].
+    /// Temperature columns for the thermal effect; `None` = every column whose declared unit
+    /// (`column_units`) is a temperature unit (see
+    /// [`is_temperature_unit`](super::is_temperature_unit)) [None]. A name that is
+    /// not a covariate column of the record is an error.
     pub temperature_columns: Option<Vec<String>>,
+    /// Declared units of the record's covariate columns, e.g. `air_temp_f = "degF"` [none].
+    /// They choose the thermal effect's candidates (a temperature unit) and the data-driven
+    /// term's differences of same-unit columns (air minus water temperature); a column's name
+    /// is never read for its meaning. A key that is not a covariate column of the record is
+    /// an error, so a misspelt column cannot silently drop a candidate.
+    pub column_units: BTreeMap<String, String>,
     /// The scalar load of the model inputs, when the model has one (a gate's head): it gives
     /// the load-path hysteresis effect and the load nuisance [None].
     pub load: Option<LoadSpec>,
@@ -133,6 +142,7 @@ impl Default for CloseLoopConfig {
             max_steps: 4,
             min_relative_improvement: 0.05,
             temperature_columns: None,
+            column_units: BTreeMap::new(),
             load: None,
             parameter_name: "parameter".into(),
             output_unit: "output units".into(),
@@ -220,6 +230,53 @@ impl CloseLoopConfig {
     pub fn load(mut self, load: LoadSpec) -> Self {
         self.load = Some(load);
         self
+    }
+
+    /// Declares the unit of a covariate column (a temperature unit makes it a thermal
+    /// candidate; columns of one unit give difference features).
+    ///
+    /// ```
+    /// let c = bamudi::closeloop::CloseLoopConfig::default().column_unit("air_temp_f", "degF");
+    /// assert_eq!(c.column_units["air_temp_f"], "degF");
+    /// ```
+    pub fn column_unit(mut self, column: &str, unit: &str) -> Self {
+        self.column_units.insert(column.into(), unit.into());
+        self
+    }
+
+    /// Checks the column names of `temperature_columns` and `column_units` against the
+    /// record's covariate columns (`file` and `covariates` name them in the error).
+    pub fn check_columns(&self, file: &str, covariates: &[String]) -> Result<(), BamudiError> {
+        let missing = |key: &'static str, name: &str| {
+            Err(BamudiError::config(
+                key,
+                format!(
+                    "'{name}' is not a covariate column of {file} (its covariate columns: {})",
+                    if covariates.is_empty() {
+                        "none".to_string()
+                    } else {
+                        covariates.join(", ")
+                    }
+                ),
+            ))
+        };
+        for name in self.temperature_columns.iter().flatten() {
+            if !covariates.contains(name) {
+                return missing("temperature_columns", name);
+            }
+        }
+        for (name, unit) in &self.column_units {
+            if !covariates.contains(name) {
+                return missing("column_units", name);
+            }
+            if unit.trim().is_empty() {
+                return Err(BamudiError::config(
+                    "column_units",
+                    format!("the unit of '{name}' is empty"),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Names the outputs' unit (in effect parameter reports).

@@ -1,12 +1,57 @@
-//! The candidate covariates of a record: time, the model inputs, the load (when the record has
-//! one, e.g. a gate's head), every other numeric column, and the rate of change per hour of
-//! all but time.
+//! The feature library of a record: time, the model inputs, the load (when the record has one,
+//! e.g. a gate's head), every other numeric column and the rate of change per hour of all but
+//! time (the residual checks look at these); then the derived candidates of the data-driven
+//! term: differences of covariates with the same declared unit, their rates, and daily and
+//! seasonal harmonics. Lags with a fitted time constant are built by the data-driven term
+//! itself, since the constant is fitted to the residual.
 
 use super::MeasuredRecord;
 use super::config::LoadSpec;
+use std::collections::BTreeMap;
+
+/// Hours in a day and in a (Julian) year: the harmonics' periods.
+const DAY_H: f64 = 24.0;
+const YEAR_H: f64 = 365.25 * DAY_H;
+
+/// Whether `unit` is a temperature unit: `degF`, `degC`, `K`, `°F`, `°C`, `fahrenheit`,
+/// `celsius`, `kelvin` (any letter case). Such a declared column is a thermal candidate.
+///
+/// ```
+/// use bamudi::closeloop::is_temperature_unit;
+/// assert!(is_temperature_unit("degF") && is_temperature_unit("°c"));
+/// assert!(!is_temperature_unit("in") && !is_temperature_unit("F_per_h"));
+/// ```
+pub fn is_temperature_unit(unit: &str) -> bool {
+    matches!(canonical_unit(unit).as_str(), "degf" | "degc" | "k")
+}
+
+/// A unit in lower case with the spellings of one temperature scale made one (`°F`,
+/// `fahrenheit` → `degf`), so that columns in `degF` and `°F` pair up for differences.
+fn canonical_unit(unit: &str) -> String {
+    let u = unit.trim().to_lowercase();
+    match u.as_str() {
+        "°f" | "fahrenheit" => "degf".into(),
+        "°c" | "celsius" => "degc".into(),
+        "kelvin" => "k".into(),
+        _ => u,
+    }
+}
+
+/// Whether a unit measures nothing a difference would make sense of (a phase, a count).
+fn dimensionless(unit: &str) -> bool {
+    matches!(unit.trim(), "" | "1" | "-" | "none" | "dimensionless")
+}
 
 /// Candidate features derived from a record, in this order: `time_days`, the inputs, the load
-/// (if declared), the CSV covariates, then `d_<name>_per_h` of every column but time.
+/// (if declared), the CSV covariates, `d_<name>_per_h` of every column so far but time (the
+/// first [`checked`](Self::checked) columns); then `<a>_minus_<b>` for covariates `a`, `b` of
+/// one declared unit (not a dimensionless one) and their rates; then the harmonics
+/// `daily_sin`, `daily_cos` (period 24 h; when the record spans two days at a median step of
+/// at most 6 h), `semidaily_sin`, `semidaily_cos` (12 h; step at most 3 h: a daily cycle that
+/// is not a sinusoid, such as sun on a gauge, needs its second harmonic) and `seasonal_sin`,
+/// `seasonal_cos` (365.25 d; when the record spans a year: over a shorter record they are a
+/// smooth trend, which the drift and the track already are). Time is measured from the first
+/// row, so the phases are relative to it.
 #[derive(Debug, Clone)]
 pub struct Features {
     /// Feature names.
@@ -22,6 +67,12 @@ pub struct Features {
     /// Columns `1..=model_columns` are the model's own inputs (and the load): effects that
     /// look beyond the model skip them.
     pub model_columns: usize,
+    /// Columns `0..checked` are the record's own columns and their rates: the residual checks
+    /// correlate with these; the rest are derived candidates of the data-driven term.
+    pub checked: usize,
+    /// The level columns (covariates and same-unit differences, not rates or harmonics) whose
+    /// first-order lag the data-driven term may use.
+    pub lag_sources: Vec<usize>,
 }
 
 /// Backward difference `dv/dt` (forward at the first row; 0 for a single row).
@@ -43,8 +94,13 @@ fn backward_rate(t: &[f64], v: &[f64]) -> Vec<f64> {
 }
 
 impl Features {
-    /// The features of `rec` with the optional declared `load`.
-    pub fn new(rec: &MeasuredRecord, load: Option<&LoadSpec>) -> Self {
+    /// The features of `rec` with the optional declared `load` and the covariates' declared
+    /// `units` (column name → unit).
+    pub fn new(
+        rec: &MeasuredRecord,
+        load: Option<&LoadSpec>,
+        units: &BTreeMap<String, String>,
+    ) -> Self {
         let t = rec.time_h.clone();
         let mut names = vec!["time_days".to_string()];
         let mut cols = vec![t.iter().map(|h| h / 24.0).collect::<Vec<f64>>()];
@@ -67,10 +123,19 @@ impl Features {
             cols.push(rec.covariates.column(k).iter().copied().collect());
         }
         let n_base = names.len();
-        for k in 1..n_base {
-            names.push(format!("d_{}_per_h", names[k]));
-            cols.push(backward_rate(&t, &cols[k]));
+        let mut lag_sources: Vec<usize> = (model_columns + 1..n_base).collect();
+        push_rates(&mut names, &mut cols, &t, 1..n_base);
+        let checked = names.len();
+        let first_difference = names.len();
+        for (a, b) in same_unit_pairs(&rec.covariate_names, units) {
+            let (ca, cb) = (model_columns + 1 + a, model_columns + 1 + b);
+            names.push(format!("{}_minus_{}", names[ca], names[cb]));
+            cols.push(cols[ca].iter().zip(&cols[cb]).map(|(x, y)| x - y).collect());
         }
+        let differences = first_difference..names.len();
+        lag_sources.extend(differences.clone());
+        push_rates(&mut names, &mut cols, &t, differences);
+        push_harmonics(&mut names, &mut cols, &t);
         let load_rate = backward_rate(&t, &load_values);
         Self {
             names,
@@ -79,12 +144,70 @@ impl Features {
             load: load_values,
             load_rate,
             model_columns,
+            checked,
+            lag_sources,
         }
     }
 
     /// The position of the feature `name`.
     pub fn position(&self, name: &str) -> Option<usize> {
         self.names.iter().position(|n| n == name)
+    }
+}
+
+/// Appends `d_<name>_per_h` of the columns `range`.
+fn push_rates(
+    names: &mut Vec<String>,
+    cols: &mut Vec<Vec<f64>>,
+    t: &[f64],
+    range: std::ops::Range<usize>,
+) {
+    for k in range {
+        names.push(format!("d_{}_per_h", names[k]));
+        cols.push(backward_rate(t, &cols[k]));
+    }
+}
+
+/// The pairs `(a, b)`, `a < b`, of covariates (positions in `covariates`) declared in one
+/// unit that is not dimensionless.
+fn same_unit_pairs(covariates: &[String], units: &BTreeMap<String, String>) -> Vec<(usize, usize)> {
+    let unit = |k: usize| units.get(&covariates[k]).map(|u| canonical_unit(u));
+    let mut pairs = Vec::new();
+    for a in 0..covariates.len() {
+        for b in a + 1..covariates.len() {
+            if let (Some(ua), Some(ub)) = (unit(a), unit(b))
+                && ua == ub
+                && !dimensionless(&ua)
+            {
+                pairs.push((a, b));
+            }
+        }
+    }
+    pairs
+}
+
+/// Appends the daily and seasonal harmonics the record can resolve (see [`Features`]).
+fn push_harmonics(names: &mut Vec<String>, cols: &mut Vec<Vec<f64>>, t: &[f64]) {
+    let span = t.last().copied().unwrap_or(0.0) - t.first().copied().unwrap_or(0.0);
+    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median_step = steps.get(steps.len() / 2).copied().unwrap_or(f64::INFINITY);
+    let mut push = |label: &str, period_h: f64| {
+        let w = std::f64::consts::TAU / period_h;
+        names.push(format!("{label}_sin"));
+        cols.push(t.iter().map(|h| (w * h).sin()).collect());
+        names.push(format!("{label}_cos"));
+        cols.push(t.iter().map(|h| (w * h).cos()).collect());
+    };
+    // at least four rows per period: two would sample a sinusoid at its zeros only
+    if span >= 2.0 * DAY_H && median_step <= DAY_H / 4.0 {
+        push("daily", DAY_H);
+    }
+    if span >= 2.0 * DAY_H && median_step <= DAY_H / 8.0 {
+        push("semidaily", DAY_H / 2.0);
+    }
+    if span >= YEAR_H {
+        push("seasonal", YEAR_H);
     }
 }
 

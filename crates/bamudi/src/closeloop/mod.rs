@@ -69,7 +69,7 @@ pub use effect::{
 };
 pub use effects::LinearTerm;
 pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
-pub use features::Features;
+pub use features::{Features, is_temperature_unit};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, parse_csv, read_csv};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 pub use track::{ThetaTrack, TrackAlarm, TrackConfig, TrackPoint, TrackState};
@@ -319,8 +319,9 @@ pub fn close_loop_with(
             ),
         ));
     }
+    cfg.check_columns(&rec.file, &rec.covariate_names)?;
     let w = Windows::of(rec, cfg)?;
-    let feats = Features::new(rec, cfg.load.as_ref());
+    let feats = Features::new(rec, cfg.load.as_ref(), &cfg.column_units);
     let lp = Loop {
         calibrator,
         x: &rec.x,

@@ -164,7 +164,9 @@ pub(crate) fn adequacy(
     th: &CheckThresholds,
 ) -> Adequacy {
     let n = rows.len();
-    let n_tests = (gauges.len() * (3 + features.names.len())) as f64;
+    // the record's own columns and their rates; the derived candidates are not checked
+    let checked = &features.names[..features.checked];
+    let n_tests = (gauges.len() * (3 + checked.len())) as f64;
     let alpha = th.significance / n_tests;
     let z_crit = normal_quantile_upper(alpha / 2.0);
     let mut failures = Vec::new();
@@ -179,7 +181,7 @@ pub(crate) fn adequacy(
     // a correlation of white noise with any series has sd ≈ 1/sqrt(n)
     let corr_crit = z_crit / (n as f64).sqrt();
     let mut correlations = Vec::new();
-    for (name, col) in features.names.iter().zip(&features.cols) {
+    for (name, col) in checked.iter().zip(&features.cols) {
         let c = largest_correlation(name, col, r, rows, gauges);
         if c.max_abs_correlation > corr_crit {
             failures.push(format!(

@@ -3,6 +3,7 @@
 //! of the user's own found through the open library. The loop on the finite-element gate is
 //! tested in `bamudi-gate`.
 
+mod features;
 mod ingest;
 
 use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
@@ -19,10 +20,13 @@ const GAP_BOUNDS: (f64, f64) = (40.0, 200.0);
 /// 45 days hourly.
 const ROWS: usize = 1080;
 
+/// The toy record's air temperature is in °F (declared: the loop never reads a column's
+/// meaning from its name).
 fn config() -> CloseLoopConfig {
     CloseLoopConfig::default()
         .load(toy_load())
         .parameter_name("gap")
+        .column_unit("air_temp_f", "degF")
 }
 
 fn run(seed: u64, effect: impl Fn(f64, usize) -> f64) -> CloseLoopOutcome {

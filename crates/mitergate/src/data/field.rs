@@ -106,6 +106,16 @@ pub struct LoadPathHysteresis {
     pub amplitude: Vec<f64>,
 }
 
+/// The units of the covariate columns of the CSV layout (see the module docs); `lockage_phase`
+/// is a code (`1`, dimensionless).
+pub const COVARIATE_UNITS: [(&str, &str); 5] = [
+    ("upper_pool", "in"),
+    ("chamber", "in"),
+    ("air_temp_f", "degF"),
+    ("water_temp_f", "degF"),
+    ("lockage_phase", "1"),
+];
+
 /// Lock-wall flexure under the upper pool transmitted to the gauges through the quoin:
 /// `coefficient_g × (upper_pool − mean upper pool)`. It depends on a covariate that is not a
 /// gate load input, so it stands in for "an effect nobody declared". Typical 0.1–1

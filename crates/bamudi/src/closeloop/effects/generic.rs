@@ -1,23 +1,31 @@
 //! The data-driven term: a sparse linear model in the record's covariates, for effects outside
 //! the library, named by the covariates it uses.
 
-use super::linear::{Basis, LinearTerm};
+use super::linear::{Basis, LinearTerm, lagged};
+use super::stepwise;
+use super::thermal::{best_lag_on_grid, lag_grid_h};
 use crate::closeloop::effect::{Effect, EffectKind, FitContext, Fitted, param};
-use crate::closeloop::stats::{correlation, ols, select_rows};
+use crate::closeloop::stats::correlation;
 use crate::error::Result;
 use nalgebra::DMatrix;
 use std::sync::Arc;
 
-/// A sparse linear term in at most `max_features` standardised covariates (one shared set,
-/// per-gauge coefficients). The model's own inputs and the load (and any covariate that
+/// A sparse linear term in at most `max_features` standardised candidates (one shared set,
+/// per-gauge coefficients): the record's features beside the model (see
+/// [`Features`](crate::closeloop::Features): covariates, rates, same-unit differences,
+/// harmonics) and first-order lags of its level columns with a fitted time constant. The model's own inputs and the load (and any covariate that
 /// duplicates one of them) are left out: the calibrated model's discrepancy is already a
 /// function of them.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Generic {
     /// Most covariates in the term.
     pub max_features: usize,
     /// How the covariates are selected.
     pub selection: Selection,
+    /// Columns whose first-order lag is a library effect's own form (the thermal effect's
+    /// temperature columns): their lags are not candidates, so the data-driven term cannot
+    /// re-fit a library effect with more freedom and take it over.
+    pub lag_covered: Vec<String>,
 }
 
 /// How the data-driven term selects its covariates.
@@ -26,6 +34,9 @@ pub enum Selection {
     /// Forward stepwise least squares, stopped by BIC.
     #[default]
     StepwiseBic,
+    /// The same forward path, cut at the length with the least held-out error over five
+    /// contiguous blocks of the calibration rows (the path rebuilt without each block).
+    StepwiseCv,
     /// The multi-task lasso path (`linfa-elasticnet`, a group penalty across gauges) with the
     /// penalty chosen by blocked cross-validation in time of the refitted least squares.
     GroupLassoCv,
@@ -42,26 +53,25 @@ impl Effect for Generic {
         EffectKind::DataDriven
     }
     fn fit(self: Arc<Self>, ctx: &FitContext<'_>, r: &DMatrix<f64>) -> Result<Option<Fitted>> {
-        let cols = match self.selection {
-            Selection::StepwiseBic => select_stepwise(ctx, r, self.max_features),
-            Selection::GroupLassoCv => super::lasso::select(ctx, r, self.max_features),
+        let cands = candidates(ctx, r, &self.lag_covered);
+        let chosen = match self.selection {
+            Selection::StepwiseBic => stepwise::select_bic(ctx, r, &cands, self.max_features),
+            Selection::StepwiseCv => stepwise::select_cv(ctx, r, &cands, self.max_features),
+            Selection::GroupLassoCv => super::lasso::select(ctx, r, &cands, self.max_features),
         };
-        let Some(cols) = cols else {
+        let Some(chosen) = chosen else {
             return Ok(None);
         };
-        let stats = column_stats(ctx);
-        let mean = cols.iter().map(|&c| stats[c].0).collect();
-        let sd: Vec<f64> = cols.iter().map(|&c| stats[c].1).collect();
-        let names: Vec<String> = cols.iter().map(|&c| ctx.feats.names[c].clone()).collect();
-        let term = LinearTerm::fit(
-            Basis::Generic {
-                cols,
-                mean,
-                sd: sd.clone(),
-            },
-            ctx,
-            r,
-        );
+        let chosen: Vec<&Candidate> = chosen.iter().map(|&k| &cands[k]).collect();
+        let names: Vec<String> = chosen.iter().map(|c| c.name.clone()).collect();
+        let sd: Vec<f64> = chosen.iter().map(|c| c.sd).collect();
+        let basis = Basis::Generic {
+            cols: chosen.iter().map(|c| c.col).collect(),
+            lags_h: chosen.iter().map(|c| c.tau_h).collect(),
+            mean: chosen.iter().map(|c| c.mean).collect(),
+            sd: sd.clone(),
+        };
+        let term = LinearTerm::fit(basis, ctx, r);
         let mut p = vec![term.parameter(0, "intercept", ctx.unit)];
         for (k, nm) in names.iter().enumerate() {
             let name = format!("per_sd_of_{nm} (sd = {:.4})", sd[k]);
@@ -71,56 +81,90 @@ impl Effect for Generic {
                 term.coef.row(k + 1).iter().copied().collect(),
             ));
         }
-        let plot = names[0].clone();
+        // plotted against the feature itself (a lagged candidate's source column)
+        let plot = ctx.feats.names[chosen[0].col].clone();
         Ok(Some(Fitted::new(self, Arc::new(term), names, p, &plot)))
     }
 }
 
-/// Mean and population sd of every feature over the calibration rows.
-pub(super) fn column_stats(ctx: &FitContext<'_>) -> Vec<(f64, f64)> {
-    let (cal, n) = (ctx.cal, ctx.cal.len() as f64);
-    ctx.feats
-        .cols
-        .iter()
-        .map(|c| {
-            let m = cal.iter().map(|&i| c[i]).sum::<f64>() / n;
-            let sd = (cal.iter().map(|&i| (c[i] - m).powi(2)).sum::<f64>() / n).sqrt();
-            (m, sd)
-        })
-        .collect()
+/// A candidate covariate of the data-driven term: feature `col`, through a first-order lag of
+/// `tau_h` hours when positive, with its values at every row and their mean and population sd
+/// on the calibration rows.
+pub(super) struct Candidate {
+    /// Feature column.
+    pub col: usize,
+    /// Lag time constant (hours; 0 = none).
+    pub tau_h: f64,
+    /// Name in reports: the feature's, or `lag<τ>h(<feature>)`.
+    pub name: String,
+    /// Values at every row.
+    pub values: Vec<f64>,
+    /// Mean on the calibration rows.
+    pub mean: f64,
+    /// Population sd on the calibration rows.
+    pub sd: f64,
 }
 
-/// The columns forward stepwise BIC selects (`None`: none improves on the intercept).
-fn select_stepwise(ctx: &FitContext<'_>, r: &DMatrix<f64>, max: usize) -> Option<Vec<usize>> {
-    let (f, cal) = (ctx.feats, ctx.cal);
-    let stats = column_stats(ctx);
-    let rc = select_rows(r, cal);
-    let bic = |cols: &[usize]| bic_of(ctx, &stats, &rc, cols);
-    let beside_model = |c: usize| beside_model(ctx, c);
-    let mut chosen: Vec<usize> = vec![];
-    let mut best = bic(&chosen);
-    while chosen.len() < max {
-        let mut step: Option<(f64, usize)> = None;
-        for c in 0..f.cols.len() {
-            if chosen.contains(&c) || stats[c].1 <= 1e-12 || !beside_model(c) {
-                continue;
-            }
-            let mut trial = chosen.clone();
-            trial.push(c);
-            let v = bic(&trial);
-            if step.is_none_or(|s| v < s.0) {
-                step = Some((v, c));
-            }
-        }
-        match step {
-            Some((v, c)) if v < best => {
-                best = v;
-                chosen.push(c);
-            }
-            _ => break,
+impl Candidate {
+    fn new(ctx: &FitContext<'_>, col: usize, tau_h: f64) -> Self {
+        let values = lagged(ctx.feats, col, tau_h);
+        let n = ctx.cal.len() as f64;
+        let mean = ctx.cal.iter().map(|&i| values[i]).sum::<f64>() / n;
+        let var = ctx
+            .cal
+            .iter()
+            .map(|&i| (values[i] - mean).powi(2))
+            .sum::<f64>()
+            / n;
+        let feature = &ctx.feats.names[col];
+        let name = if tau_h > 0.0 {
+            format!("lag{tau_h}h({feature})")
+        } else {
+            feature.clone()
+        };
+        Self {
+            col,
+            tau_h,
+            name,
+            values,
+            mean,
+            sd: var.sqrt(),
         }
     }
-    (!chosen.is_empty()).then_some(chosen)
+
+    /// The standardised value at row `i`.
+    pub fn z(&self, i: usize) -> f64 {
+        (self.values[i] - self.mean) / self.sd
+    }
+}
+
+/// The candidates: every feature beside the model that varies on the calibration rows; and,
+/// for every lag source ([`Features::lag_sources`](crate::closeloop::Features::lag_sources))
+/// beside the model and not in `covered`, its first-order lag at the time constant of the grid
+/// 0.5-128 h whose lag fits `r` best, unless no lag (the column itself) fits better.
+pub(super) fn candidates(
+    ctx: &FitContext<'_>,
+    r: &DMatrix<f64>,
+    covered: &[String],
+) -> Vec<Candidate> {
+    let f = ctx.feats;
+    let beside: Vec<bool> = (0..f.cols.len()).map(|c| beside_model(ctx, c)).collect();
+    let lag_ok = |c: usize| beside[c] && !covered.contains(&f.names[c]);
+    let mut out: Vec<Candidate> = (0..f.cols.len())
+        .filter(|&c| beside[c])
+        .map(|c| Candidate::new(ctx, c, 0.0))
+        .filter(|c| c.sd > 1e-12)
+        .collect();
+    for &c in f.lag_sources.iter().filter(|&&c| lag_ok(c)) {
+        let (k, _) = best_lag_on_grid(ctx, r, c);
+        if k > 0 {
+            let cand = Candidate::new(ctx, c, lag_grid_h(k));
+            if cand.sd > 1e-12 {
+                out.push(cand);
+            }
+        }
+    }
+    out
 }
 
 /// Whether feature `c` is beside the model: not one of its inputs (or the load), and not a
@@ -134,23 +178,4 @@ pub(super) fn beside_model(ctx: &FitContext<'_>, c: usize) -> bool {
         && model
             .clone()
             .all(|m| correlation(&values(c), &values(m)).abs() <= 0.999)
-}
-
-/// BIC of the least-squares fit of `rc` (calibration rows) on a constant and `cols`.
-fn bic_of(ctx: &FitContext<'_>, stats: &[(f64, f64)], rc: &DMatrix<f64>, cols: &[usize]) -> f64 {
-    let (f, cal) = (ctx.feats, ctx.cal);
-    let (n, g) = (cal.len() as f64, rc.ncols() as f64);
-    let x = DMatrix::from_fn(cal.len(), cols.len() + 1, |i, j| {
-        if j == 0 {
-            1.0
-        } else {
-            let c = cols[j - 1];
-            (f.cols[c][cal[i]] - stats[c].0) / stats[c].1
-        }
-    });
-    let res = rc - &x * ols(&x, rc);
-    let fit: f64 = (0..res.ncols())
-        .map(|j| n * (res.column(j).norm_squared() / n).max(1e-300).ln())
-        .sum();
-    fit + (cols.len() + 1) as f64 * g * n.ln()
 }

@@ -2,13 +2,13 @@
 //! one group penalty per covariate across all gauges, so a covariate enters for every gauge or
 //! for none, with the penalty chosen by blocked cross-validation in time.
 
-use super::generic::{beside_model, column_stats};
+use super::generic::Candidate;
 use crate::closeloop::effect::FitContext;
 use crate::closeloop::stats::ols;
 use linfa::prelude::*;
 use linfa_elasticnet::MultiTaskElasticNet;
 use nalgebra::DMatrix;
-use ndarray::{Array2, Axis};
+use ndarray::{Array2, Axis, ShapeBuilder};
 
 /// Penalties on the path: `λ_max` (no covariate enters) down to `1e-3 λ_max`, log spaced.
 const PATH: usize = 12;
@@ -16,26 +16,27 @@ const PATH: usize = 12;
 /// random split of autocorrelated rows would leak).
 const FOLDS: usize = 5;
 
-/// The standardised candidate covariates (calibration rows x candidates) and their columns.
-fn candidates(ctx: &FitContext<'_>) -> (Array2<f64>, Vec<usize>) {
-    let stats = column_stats(ctx);
-    let cols: Vec<usize> = (0..ctx.feats.cols.len())
-        .filter(|&c| stats[c].1 > 1e-12 && beside_model(ctx, c))
-        .collect();
-    let x = Array2::from_shape_fn((ctx.cal.len(), cols.len()), |(i, j)| {
-        let c = cols[j];
-        (ctx.feats.cols[c][ctx.cal[i]] - stats[c].0) / stats[c].1
-    });
-    (x, cols)
+/// The standardised candidates at the calibration rows (rows x candidates).
+fn design(ctx: &FitContext<'_>, cands: &[Candidate]) -> Array2<f64> {
+    // column-major: coordinate descent takes one column at a time, and a strided column
+    // falls to ndarray's slow generic dot product
+    Array2::from_shape_fn((ctx.cal.len(), cands.len()).f(), |(i, j)| {
+        cands[j].z(ctx.cal[i])
+    })
 }
 
-/// The covariates (feature columns) the cross-validated group lasso selects, at most `max` (the
-/// largest coefficient groups); `None` when no penalty beats the intercept alone.
-pub(super) fn select(ctx: &FitContext<'_>, r: &DMatrix<f64>, max: usize) -> Option<Vec<usize>> {
-    let (x, cols) = candidates(ctx);
-    if cols.is_empty() || max == 0 {
+/// The candidates (positions in `cands`) the cross-validated group lasso selects, at most
+/// `max` (the largest coefficient groups); `None` when no penalty beats the intercept alone.
+pub(super) fn select(
+    ctx: &FitContext<'_>,
+    r: &DMatrix<f64>,
+    cands: &[Candidate],
+    max: usize,
+) -> Option<Vec<usize>> {
+    if cands.is_empty() || max == 0 {
         return None;
     }
+    let x = design(ctx, cands);
     let y = Array2::from_shape_fn((ctx.cal.len(), r.ncols()), |(i, g)| r[(ctx.cal[i], g)]);
     let lambda_max = lambda_max(&x, &y);
     let path: Vec<f64> = (0..PATH)
@@ -50,7 +51,7 @@ pub(super) fn select(ctx: &FitContext<'_>, r: &DMatrix<f64>, max: usize) -> Opti
         return None;
     }
     let chosen = selected(&x, &y, best, max);
-    (!chosen.is_empty()).then(|| chosen.into_iter().map(|j| cols[j]).collect())
+    (!chosen.is_empty()).then_some(chosen)
 }
 
 /// The smallest penalty at which no covariate enters: `max_j ‖X_jᵀ (Y − Ȳ)‖₂ / n`.

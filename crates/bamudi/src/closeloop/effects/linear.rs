@@ -24,11 +24,14 @@ pub enum Basis {
     /// Load and load² while the load rises, and while it falls (load-path hysteresis; the load
     /// in hundreds of its unit).
     LoadPath,
-    /// A constant and standardised feature columns (the data-driven term).
+    /// A constant and standardised feature columns, each possibly through a first-order lag
+    /// (the data-driven term).
     Generic {
         /// Feature columns.
         cols: Vec<usize>,
-        /// Their means on the calibration rows.
+        /// The lag time constant of each (hours; 0 = the column itself).
+        lags_h: Vec<f64>,
+        /// Their (lagged) means on the calibration rows.
         mean: Vec<f64>,
         /// Their standard deviations on the calibration rows.
         sd: Vec<f64>,
@@ -55,6 +58,15 @@ pub(crate) fn first_order_lag(t_h: &[f64], v: &[f64], tau_h: f64) -> Vec<f64> {
     out
 }
 
+/// Feature `col` through a first-order lag of `tau_h` hours (the column itself for 0).
+pub(crate) fn lagged(f: &Features, col: usize, tau_h: f64) -> Vec<f64> {
+    if tau_h > 0.0 {
+        first_order_lag(&f.time_h, &f.cols[col], tau_h)
+    } else {
+        f.cols[col].clone()
+    }
+}
+
 impl Basis {
     /// The basis matrix at every row (`n x p`).
     pub fn matrix(&self, f: &Features) -> DMatrix<f64> {
@@ -78,13 +90,25 @@ impl Basis {
                     (true, _) => h * h,
                 }
             }),
-            Self::Generic { cols, mean, sd } => DMatrix::from_fn(n, cols.len() + 1, |i, j| {
-                if j == 0 {
-                    1.0
-                } else {
-                    (f.cols[cols[j - 1]][i] - mean[j - 1]) / sd[j - 1]
-                }
-            }),
+            Self::Generic {
+                cols,
+                lags_h,
+                mean,
+                sd,
+            } => {
+                let values: Vec<Vec<f64>> = cols
+                    .iter()
+                    .zip(lags_h)
+                    .map(|(&c, &tau)| lagged(f, c, tau))
+                    .collect();
+                DMatrix::from_fn(n, cols.len() + 1, |i, j| {
+                    if j == 0 {
+                        1.0
+                    } else {
+                        (values[j - 1][i] - mean[j - 1]) / sd[j - 1]
+                    }
+                })
+            }
             Self::Columns(c) => DMatrix::from_fn(n, c.len(), |i, j| c[j][i]),
         }
     }

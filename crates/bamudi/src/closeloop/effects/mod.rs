@@ -5,6 +5,7 @@ mod generic;
 mod lasso;
 mod linear;
 mod load_path;
+mod stepwise;
 mod thermal;
 mod trend;
 
@@ -20,15 +21,20 @@ use std::sync::Arc;
 
 /// The library searched at every step when the caller gives none: gauge offset, drift and
 /// offset jump; a thermal term for every temperature column (the configured ones, or every
-/// column whose name contains `temp`); load-path hysteresis when a load is declared; a linear
-/// trend of the parameter; and the data-driven term last.
+/// column declared in a temperature unit, [`is_temperature_unit`](super::is_temperature_unit));
+/// load-path hysteresis when a load is declared; the tracked parameter; and the data-driven
+/// term last.
 pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<dyn Effect>> {
     let temp_cols: Vec<String> = match &cfg.temperature_columns {
         Some(c) => c.clone(),
         None => rec
             .covariate_names
             .iter()
-            .filter(|c| c.to_lowercase().contains("temp"))
+            .filter(|c| {
+                cfg.column_units
+                    .get(*c)
+                    .is_some_and(|u| super::is_temperature_unit(u))
+            })
             .cloned()
             .collect(),
     };
@@ -37,8 +43,10 @@ pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<d
         Arc::new(GaugeDrift),
         Arc::new(OffsetJump),
     ];
-    for column in temp_cols {
-        library.push(Arc::new(Thermal { column }));
+    for column in &temp_cols {
+        library.push(Arc::new(Thermal {
+            column: column.clone(),
+        }));
     }
     if let Some(load) = &cfg.load {
         library.push(Arc::new(LoadPathHysteresis {
@@ -52,6 +60,7 @@ pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<d
     library.push(Arc::new(Generic {
         max_features: cfg.max_generic_features,
         selection: cfg.generic_selection,
+        lag_covered: temp_cols,
     }));
     library
 }

@@ -56,14 +56,35 @@ impl Effect for Thermal {
     }
 }
 
+/// The lag time constants searched: 0 (no lag) and a doubling grid 0.5-128 h.
+const LAG_GRID_H: [f64; 10] = [0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0];
+
+/// The grid time constant of [`LAG_GRID_H`] whose lagged column `col` fits `r` best (least
+/// squares on a constant and the lagged column, calibration rows), with its position and the
+/// fit's sum of squares at every grid point.
+pub(super) fn best_lag_on_grid(
+    ctx: &FitContext<'_>,
+    r: &DMatrix<f64>,
+    col: usize,
+) -> (usize, Vec<f64>) {
+    let sse = |tau: f64| LinearTerm::fit(Basis::Thermal { col, tau_h: tau }, ctx, r).sse;
+    let vals: Vec<f64> = LAG_GRID_H.iter().map(|&t| sse(t)).collect();
+    let k = (0..LAG_GRID_H.len())
+        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
+        .unwrap_or(0);
+    (k, vals)
+}
+
+/// The time constant at grid position `k` of [`LAG_GRID_H`].
+pub(super) fn lag_grid_h(k: usize) -> f64 {
+    LAG_GRID_H[k]
+}
+
 /// Thermal term: lag time constant by a grid over 0-128 h refined by golden section on ln τ.
 fn fit_thermal(ctx: &FitContext<'_>, r: &DMatrix<f64>, col: usize) -> LinearTerm {
     let sse = |tau: f64| LinearTerm::fit(Basis::Thermal { col, tau_h: tau }, ctx, r).sse;
-    let grid = [0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0];
-    let vals: Vec<f64> = grid.iter().map(|&t| sse(t)).collect();
-    let k = (0..grid.len())
-        .min_by(|&a, &b| vals[a].total_cmp(&vals[b]))
-        .unwrap_or(0);
+    let grid = LAG_GRID_H;
+    let (k, vals) = best_lag_on_grid(ctx, r, col);
     let mut tau = grid[k];
     if k > 0 && k + 1 < grid.len() {
         // golden section on ln τ between the grid neighbours

@@ -1,0 +1,175 @@
+//! The data-driven term's feature library (issue 17, item 3) on effects outside the effect
+//! library, written into toy-gate field records here in shapes the library does not have:
+//! lock-wall flexure that follows the upper pool through a lag, and a gauge heated by the sun
+//! on a daily cycle that no covariate carries. Time constants, phases, coefficients and seeds
+//! vary; nothing below is a form the field simulator or the effect library contains.
+
+use super::*;
+use bamudi::closeloop::effects::Selection;
+use rand::{RngExt, SeedableRng, rngs::StdRng};
+
+/// Noise sd of the records (microstrain), the FieldConfig default.
+const NOISE: f64 = 1.0;
+
+/// First-order lag of `v` (hourly rows) with time constant `tau_h` hours.
+fn lag(v: &[f64], tau_h: f64) -> Vec<f64> {
+    let a = (-1.0 / tau_h).exp();
+    let mut s = v[0];
+    v.iter()
+        .map(|x| {
+            s = a * s + (1.0 - a) * x;
+            s
+        })
+        .collect()
+}
+
+/// Adds `effect(row, gauge)` (microstrain) to the record's strains.
+fn add(rec: &mut FieldRecord, effect: impl Fn(usize, usize) -> f64) {
+    for (row, strains) in rec.strains.iter_mut().enumerate() {
+        for (g, v) in strains.iter_mut().enumerate() {
+            if let Some(v) = v.as_mut() {
+                *v += effect(row, g);
+            }
+        }
+    }
+}
+
+/// Per-gauge coefficients in `[lo, hi]` of random sign.
+fn coefficients(rng: &mut StdRng, lo: f64, hi: f64) -> Vec<f64> {
+    (0..7)
+        .map(|_| {
+            let sign = if rng.random::<f64>() < 0.5 { -1.0 } else { 1.0 };
+            sign * (lo + (hi - lo) * rng.random::<f64>())
+        })
+        .collect()
+}
+
+/// Wall flexure through a lag: `k_g · L_τ(upper_pool − its mean)`, τ drawn from 12-72 h,
+/// `k_g` 0.3-0.6 microstrain per inch of pool.
+fn lagged_wall(seed: u64) -> (f64, FieldRecord) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let tau = 12.0 + 60.0 * rng.random::<f64>();
+    let k = coefficients(&mut rng, 0.3, 0.6);
+    let mut rec = record(base(seed, FieldEffects::default()));
+    let mean = rec.upper_pool.iter().sum::<f64>() / rec.upper_pool.len() as f64;
+    let pool: Vec<f64> = rec.upper_pool.iter().map(|p| p - mean).collect();
+    let l = lag(&pool, tau);
+    add(&mut rec, |row, g| k[g] * l[row]);
+    (tau, rec)
+}
+
+/// Sun on the gauges: `a_g · max(0, sin(2π (t − φ) / 24 h))`, peak phase φ drawn over the
+/// day, `a_g` 2-5 microstrain (a half-wave, not a sinusoid).
+fn solar(seed: u64) -> (f64, FieldRecord) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let phase = 24.0 * rng.random::<f64>();
+    let a = coefficients(&mut rng, 2.0, 5.0);
+    let mut rec = record(base(seed, FieldEffects::default()));
+    let t0 = rec.time_unix_s[0];
+    let hours: Vec<f64> = rec
+        .time_unix_s
+        .iter()
+        .map(|t| (t - t0) as f64 / 3600.0)
+        .collect();
+    add(&mut rec, |row, g| {
+        a[g] * (std::f64::consts::TAU * (hours[row] - phase) / 24.0)
+            .sin()
+            .max(0.0)
+    });
+    (phase, rec)
+}
+
+/// The loop with the given selection of the data-driven term.
+fn run_with(rec: &FieldRecord, selection: Selection) -> CloseLoopOutcome {
+    let gauges: Vec<&str> = rec.gauge_names.iter().map(String::as_str).collect();
+    let ingest = IngestConfig::new(&["h_up", "h_down"], &gauges);
+    let data = parse_csv(&rec.to_csv_string(), "simulated.csv", &ingest).unwrap();
+    let mut cfg = toy_config(&data);
+    cfg.generic_selection = selection;
+    close_loop(
+        &data,
+        &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
+        &cfg,
+    )
+    .unwrap()
+}
+
+fn line(label: &str, x: f64, out: &CloseLoopOutcome) -> String {
+    let r = &out.report;
+    format!(
+        "{label} {x:6.2}: {:?}; test rmse {:.3} -> {:.3}; gap {:.2} ± {:.2} -> {:.2} ± {:.2}",
+        r.effects
+            .iter()
+            .map(|e| (e.name.clone(), e.covariates.clone()))
+            .collect::<Vec<_>>(),
+        r.heldout_rmse_total_before,
+        r.heldout_rmse_total_after,
+        r.theta_before.mean,
+        r.theta_before.sd,
+        r.theta_after.mean,
+        r.theta_after.sd,
+    )
+}
+
+/// Test-window RMSE the loop must reach (microstrain): within 15 % of the gauge noise, so a
+/// remainder of more than `sqrt(1.15² − 1) ≈ 0.57` noise sd RMS that the term missed fails.
+const NOISE_BOUND: f64 = 1.15 * NOISE;
+
+/// Seeds of the records; the shape's parameters are drawn from each seed.
+const SEEDS: std::ops::Range<u64> = 500..506;
+
+/// Runs the loop on every seed's record and checks: an effect outside the library is found by
+/// the data-driven term, named by `expected` (its first covariate) in all but at most one
+/// record, the test-window error falls to within [`NOISE_BOUND`] in every record, and the gap
+/// stays within 0.5 in of the truth (90 in; the prior is 160 in wide). The stand-in
+/// calibrator's gap sd (0.05-0.1 in) is not checked for coverage here: its intervals are not
+/// the product's (issue 15 measures those).
+fn check_named(label: &str, make: fn(u64) -> (f64, FieldRecord), expected: fn(&str) -> bool) {
+    let mut named = 0;
+    for seed in SEEDS {
+        let (x, rec) = make(seed);
+        let out = run_with(&rec, Selection::default());
+        eprintln!("{}", line(&format!("{label} seed {seed}"), x, &out));
+        let r = &out.report;
+        let generic = r
+            .effects
+            .iter()
+            .find(|e| e.name == "generic_covariate_term")
+            .unwrap_or_else(|| panic!("{label} seed {seed}: no data-driven term"));
+        named += usize::from(expected(&generic.covariates[0]));
+        assert!(
+            r.heldout_rmse_total_after <= NOISE_BOUND,
+            "{label} seed {seed}: test-window rmse {:.3}",
+            r.heldout_rmse_total_after
+        );
+        assert!(r.heldout_rmse_total_after < r.heldout_rmse_total_before);
+        let gap = r.theta_after.mean;
+        assert!(
+            (gap - 90.0).abs() <= 0.5,
+            "{label} seed {seed}: gap {gap:.2}"
+        );
+    }
+    assert!(
+        named + 1 >= SEEDS.count(),
+        "{label}: named {named} of {}",
+        SEEDS.count()
+    );
+}
+
+/// Measured: the first covariate is `lag<τ>h(upper_pool)` in 6 of 6 records (τ on the grid:
+/// 32-64 h for true 42-69 h), test-window rmse 0.98-1.05 (before 1.26-2.23).
+#[test]
+fn lagged_wall_flexure_is_named_by_a_lag_of_the_upper_pool() {
+    check_named("lagged wall", lagged_wall, |c| {
+        c.starts_with("lag") && c.ends_with("(upper_pool)")
+    });
+}
+
+/// Measured: the first covariate is a daily or semi-daily harmonic in 5 of 6 records (one
+/// starts with `d_water_temp_f_per_h`), test-window rmse 1.00-1.05 (before 1.76-2.22).
+#[test]
+fn sun_on_the_gauges_is_named_by_daily_harmonics() {
+    check_named("solar", solar, |c| {
+        c.starts_with("daily") || c.starts_with("semidaily")
+    });
+}
