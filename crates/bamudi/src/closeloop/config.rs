@@ -117,8 +117,7 @@ pub struct CloseLoopConfig {
     pub output_unit: String,
     /// Maximum number of covariates in the generic term [3].
     pub max_generic_features: usize,
-    /// How the generic term selects its covariates [stepwise BIC].
-    #[serde(skip)]
+    /// How the generic term selects its covariates [`stepwise_bic`].
     pub generic_selection: super::effects::Selection,
     /// Lags of the Ljung-Box test [10].
     pub ljung_box_lags: usize,

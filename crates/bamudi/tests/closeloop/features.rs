@@ -140,3 +140,13 @@ fn a_declared_column_the_record_lacks_is_an_error_naming_key_and_file() {
     let empty = CloseLoopConfig::default().column_unit("air_temp_f", " ");
     assert!(close_loop(&rec, &cal, &empty).is_err());
 }
+
+#[test]
+fn units_and_selection_are_read_from_toml() {
+    let text = "generic_selection = \"stepwise_cv\"\n[column_units]\nair_temp_f = \"degF\"\n";
+    let cfg: CloseLoopConfig = toml::from_str(text).unwrap();
+    assert_eq!(cfg.generic_selection, effects::Selection::StepwiseCv);
+    assert_eq!(cfg.column_units["air_temp_f"], "degF");
+    let e = toml::from_str::<CloseLoopConfig>("generic_selection = \"lasso\"\n").unwrap_err();
+    assert!(e.to_string().contains("generic_selection"), "{e}");
+}

@@ -100,9 +100,13 @@ temperature_columns = [\"air_temp_f\", \"water_temp_f\"]\n\
 parameter_name = \"gap\"\n\
 output_unit = \"microstrain\"\n\
 max_generic_features = 3\n\
+generic_selection = \"stepwise_bic\"\n\
 ljung_box_lags = 10\n\
 significance = 0.01\n\
 confirm_candidates = 3\n\
+[column_units]\n\
+air_temp_f = \"degF\"\n\
+water_temp_f = \"degF\"\n\
 [event_scan]\n\
 enabled = true\n\
 min_segment_rows = 8\n\

@@ -28,8 +28,10 @@ pub struct Generic {
     pub lag_covered: Vec<String>,
 }
 
-/// How the data-driven term selects its covariates.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How the data-driven term selects its covariates (TOML: `"stepwise_bic"`, `"stepwise_cv"`,
+/// `"group_lasso_cv"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Selection {
     /// Forward stepwise least squares, stopped by BIC.
     #[default]
