@@ -94,23 +94,6 @@ fn run_with(rec: &FieldRecord, selection: Selection) -> CloseLoopOutcome {
     .unwrap()
 }
 
-fn line(label: &str, x: f64, out: &CloseLoopOutcome) -> String {
-    let r = &out.report;
-    format!(
-        "{label} {x:6.2}: {:?}; test rmse {:.3} -> {:.3}; gap {:.2} ± {:.2} -> {:.2} ± {:.2}",
-        r.effects
-            .iter()
-            .map(|e| (e.name.clone(), e.covariates.clone()))
-            .collect::<Vec<_>>(),
-        r.heldout_rmse_total_before,
-        r.heldout_rmse_total_after,
-        r.theta_before.mean,
-        r.theta_before.sd,
-        r.theta_after.mean,
-        r.theta_after.sd,
-    )
-}
-
 /// Test-window RMSE the loop must reach (microstrain): within 15 % of the gauge noise, so a
 /// remainder of more than `sqrt(1.15² − 1) ≈ 0.57` noise sd RMS that the term missed fails.
 const NOISE_BOUND: f64 = 1.15 * NOISE;
@@ -129,7 +112,7 @@ fn check_named(label: &str, make: fn(u64) -> (f64, FieldRecord), expected: fn(&s
     for seed in SEEDS {
         let (x, rec) = make(seed);
         let out = run_with(&rec, Selection::default());
-        eprintln!("{}", line(&format!("{label} seed {seed}"), x, &out));
+        summary(&format!("{label} seed {seed} (parameter {x:.2})"), &out);
         let r = &out.report;
         let generic = r
             .effects

@@ -56,3 +56,22 @@ pub fn toy_config(rec: &MeasuredRecord) -> CloseLoopConfig {
     }
     cfg
 }
+
+/// Prints the loop's effects, test-window RMSE, gap and conclusion (for the closing notes).
+pub fn summary(name: &str, out: &CloseLoopOutcome) {
+    let r = &out.report;
+    eprintln!(
+        "{name}: effects {:?}; held-out rmse {:.3} -> {:.3}; theta {:.2}±{:.2} -> {:.2}±{:.2}; {}",
+        r.effects
+            .iter()
+            .map(|e| (e.name.clone(), e.covariates.clone()))
+            .collect::<Vec<_>>(),
+        r.heldout_rmse_total_before,
+        r.heldout_rmse_total_after,
+        r.theta_before.mean,
+        r.theta_before.sd,
+        r.theta_after.mean,
+        r.theta_after.sd,
+        r.conclusion
+    );
+}

@@ -4,24 +4,6 @@ use mitergate::data::field::*;
 /// Noise sd of every simulated record (microstrain), the FieldConfig default.
 const NOISE: f64 = 1.0;
 
-fn summary(name: &str, out: &CloseLoopOutcome) {
-    let r = &out.report;
-    eprintln!(
-        "{name}: effects {:?}; held-out rmse {:.3} -> {:.3}; theta {:.2}±{:.2} -> {:.2}±{:.2}; {}",
-        r.effects
-            .iter()
-            .map(|e| (e.name.clone(), e.covariates.clone()))
-            .collect::<Vec<_>>(),
-        r.heldout_rmse_total_before,
-        r.heldout_rmse_total_after,
-        r.theta_before.mean,
-        r.theta_before.sd,
-        r.theta_after.mean,
-        r.theta_after.sd,
-        r.conclusion
-    );
-}
-
 /// The loop names `expected` first, reaches the noise level on held-out data and does not
 /// move the gap away from `true_gap`.
 fn check_found(name: &str, out: &CloseLoopOutcome, expected: &str, true_gap: f64) {

@@ -3,8 +3,8 @@
 //! for none, with the penalty chosen by blocked cross-validation in time.
 
 use super::generic::Candidate;
+use super::stepwise::{folds, held_out_sse};
 use crate::closeloop::effect::FitContext;
-use crate::closeloop::stats::ols;
 use linfa::prelude::*;
 use linfa_elasticnet::MultiTaskElasticNet;
 use nalgebra::DMatrix;
@@ -12,10 +12,6 @@ use ndarray::{Array2, Axis, ShapeBuilder};
 
 /// Penalties on the path: `λ_max` (no covariate enters) down to `1e-3 λ_max`, log spaced.
 const PATH: usize = 12;
-/// Contiguous blocks of the calibration rows for the cross-validation (time order kept: a
-/// random split of autocorrelated rows would leak).
-const FOLDS: usize = 5;
-
 /// The standardised candidates at the calibration rows (rows x candidates).
 fn design(ctx: &FitContext<'_>, cands: &[Candidate]) -> Array2<f64> {
     // column-major: coordinate descent takes one column at a time, and a strided column
@@ -42,10 +38,17 @@ pub(super) fn select(
     let path: Vec<f64> = (0..PATH)
         .map(|k| lambda_max * 10f64.powf(-3.0 * k as f64 / (PATH - 1) as f64))
         .collect();
-    let none = cv_error(&x, &y, &[]);
+    // squared error of the least-squares refit on the chosen candidates, over blocked folds
+    let cv_error = |chosen: &[usize]| -> f64 {
+        folds(ctx.cal)
+            .iter()
+            .map(|(train, test)| held_out_sse(cands, r, train, test, chosen))
+            .sum()
+    };
+    let none = cv_error(&[]);
     let (best, err) = path
         .iter()
-        .map(|&l| (l, cv_error(&x, &y, &selected(&x, &y, l, max))))
+        .map(|&l| (l, cv_error(&selected(&x, &y, l, max))))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     if err >= none {
         return None;
@@ -91,26 +94,4 @@ fn selected(x: &Array2<f64>, y: &Array2<f64>, lambda: f64, max: usize) -> Vec<us
         .collect();
     groups.sort_by(|a, b| b.0.total_cmp(&a.0));
     groups.into_iter().take(max).map(|(_, j)| j).collect()
-}
-
-/// Mean squared held-out error of the least-squares refit (intercept + `cols`) over
-/// [`FOLDS`] contiguous blocks.
-fn cv_error(x: &Array2<f64>, y: &Array2<f64>, cols: &[usize]) -> f64 {
-    let n = x.nrows();
-    let design = |rows: &[usize]| {
-        DMatrix::from_fn(rows.len(), cols.len() + 1, |i, j| match j {
-            0 => 1.0,
-            _ => x[[rows[i], cols[j - 1]]],
-        })
-    };
-    let target = |rows: &[usize]| DMatrix::from_fn(rows.len(), y.ncols(), |i, g| y[[rows[i], g]]);
-    let mut sse = 0.0;
-    for k in 0..FOLDS {
-        let (lo, hi) = (k * n / FOLDS, (k + 1) * n / FOLDS);
-        let test: Vec<usize> = (lo..hi).collect();
-        let train: Vec<usize> = (0..lo).chain(hi..n).collect();
-        let coef = ols(&design(&train), &target(&train));
-        sse += (target(&test) - design(&test) * coef).norm_squared();
-    }
-    sse / (n * y.ncols()) as f64
 }

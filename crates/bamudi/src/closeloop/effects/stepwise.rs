@@ -83,26 +83,35 @@ pub(super) fn select_cv(
     cands: &[Candidate],
     max: usize,
 ) -> Option<Vec<usize>> {
-    let (cal, n) = (ctx.cal, ctx.cal.len());
     let mut err = vec![0.0; max.min(cands.len()) + 1];
-    for k in 0..FOLDS {
-        let (lo, hi) = (k * n / FOLDS, (k + 1) * n / FOLDS);
-        let train: Vec<usize> = cal[..lo].iter().chain(&cal[hi..]).copied().collect();
+    for (train, test) in folds(ctx.cal) {
         let (chosen, _) = path(cands, r, &train, max);
         for (len, e) in err.iter_mut().enumerate() {
             let prefix = &chosen[..len.min(chosen.len())];
-            *e += held_out_sse(cands, r, &train, &cal[lo..hi], prefix);
+            *e += held_out_sse(cands, r, &train, &test, prefix);
         }
     }
     let best = (0..err.len())
         .min_by(|&a, &b| err[a].total_cmp(&err[b]))
         .unwrap_or(0);
-    let (chosen, _) = path(cands, r, cal, best);
+    let (chosen, _) = path(cands, r, ctx.cal, best);
     (best > 0 && !chosen.is_empty()).then_some(chosen)
 }
 
+/// The [`FOLDS`] blocked folds of `rows` (in time order): (training rows, held-out block).
+pub(super) fn folds(rows: &[usize]) -> Vec<(Vec<usize>, Vec<usize>)> {
+    let n = rows.len();
+    (0..FOLDS)
+        .map(|k| {
+            let (lo, hi) = (k * n / FOLDS, (k + 1) * n / FOLDS);
+            let train = rows[..lo].iter().chain(&rows[hi..]).copied().collect();
+            (train, rows[lo..hi].to_vec())
+        })
+        .collect()
+}
+
 /// Squared error at `test` of the least-squares fit at `train` on a constant and `chosen`.
-fn held_out_sse(
+pub(super) fn held_out_sse(
     cands: &[Candidate],
     r: &DMatrix<f64>,
     train: &[usize],
