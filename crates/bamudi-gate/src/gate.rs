@@ -114,17 +114,9 @@ pub fn check_record(rec: &MeasuredRecord, model: &GateMultiLevel) -> Result<()> 
 
 /// The close loop on a gate record: the head `h_up − h_down` as the load (the gate is open
 /// below [`mitergate::MIN_HEAD_IN`]), the gap as the parameter, strains in microstrain, and
-/// the units of the field layout's covariates ([`COVARIATE_UNITS`](mitergate::data::field::COVARIATE_UNITS))
-/// for those `rec` has and `base` does not declare itself.
+/// the field layout's column units ([`declare_field_units`]).
 pub fn close_loop_config(base: CloseLoopConfig, rec: &MeasuredRecord) -> CloseLoopConfig {
-    let mut base = base;
-    for (column, unit) in mitergate::data::field::COVARIATE_UNITS {
-        if rec.covariate_names.iter().any(|c| c == column)
-            && !base.column_units.contains_key(column)
-        {
-            base = base.column_unit(column, unit);
-        }
-    }
+    let base = declare_field_units(base, rec);
     base.load(LoadSpec::difference(
         "head",
         0,
@@ -134,6 +126,20 @@ pub fn close_loop_config(base: CloseLoopConfig, rec: &MeasuredRecord) -> CloseLo
     ))
     .parameter_name("gap")
     .output_unit(GAUGE_UNIT)
+}
+
+/// `cfg` with the units of the field layout's covariates
+/// ([`COVARIATE_UNITS`](mitergate::data::field::COVARIATE_UNITS)) declared for those `rec`
+/// has and `cfg` does not declare itself.
+pub fn declare_field_units(cfg: CloseLoopConfig, rec: &MeasuredRecord) -> CloseLoopConfig {
+    let mut cfg = cfg;
+    for (column, unit) in mitergate::data::field::COVARIATE_UNITS {
+        if rec.covariate_names.iter().any(|c| c == column) && !cfg.column_units.contains_key(column)
+        {
+            cfg = cfg.column_unit(column, unit);
+        }
+    }
+    cfg
 }
 
 /// Simulates a field record with the gate of `contact` as the TRUE strain function

@@ -45,16 +45,11 @@ pub fn base(seed: u64, effects: FieldEffects) -> FieldConfig {
 /// parameter and the field layout's column units (as `bamudi_gate::gate::close_loop_config`
 /// sets them for the real gate).
 pub fn toy_config(rec: &MeasuredRecord) -> CloseLoopConfig {
-    let mut cfg = CloseLoopConfig::default()
+    let cfg = CloseLoopConfig::default()
         .load(toy_load())
         .parameter_name("gap")
         .output_unit("microstrain");
-    for (column, unit) in mitergate::data::field::COVARIATE_UNITS {
-        if rec.covariate_names.iter().any(|c| c == column) {
-            cfg = cfg.column_unit(column, unit);
-        }
-    }
-    cfg
+    bamudi_gate::gate::declare_field_units(cfg, rec)
 }
 
 /// Prints the loop's effects, test-window RMSE, gap and conclusion (for the closing notes).

@@ -13,9 +13,9 @@ use std::sync::Arc;
 /// A sparse linear term in at most `max_features` standardised candidates (one shared set,
 /// per-gauge coefficients): the record's features beside the model (see
 /// [`Features`](crate::closeloop::Features): covariates, rates, same-unit differences,
-/// harmonics) and first-order lags of its level columns with a fitted time constant. The model's own inputs and the load (and any covariate that
-/// duplicates one of them) are left out: the calibrated model's discrepancy is already a
-/// function of them.
+/// harmonics) and first-order lags of its level columns with a fitted time constant. The
+/// model's own inputs and the load (and any covariate that duplicates one of them) are left
+/// out: the calibrated model's discrepancy is already a function of them.
 #[derive(Debug, Clone)]
 pub struct Generic {
     /// Most covariates in the term.
