@@ -44,13 +44,28 @@ fn coefficients(rng: &mut StdRng, lo: f64, hi: f64) -> Vec<f64> {
         .collect()
 }
 
+/// A clean record of seed `seed` with `truth` as the gate.
+fn truth_record(truth: &ToyGate, seed: u64) -> FieldRecord {
+    let cfg = base(seed, FieldEffects::default());
+    simulate(&cfg, &|hu, hd, gap| truth.strain(hu, hd, gap)).unwrap()
+}
+
+/// The gate as built: influence lines 4 % stronger and local bending 6 % weaker on every gauge
+/// than the drawing the loop calibrates (the as-built gate of the event tests).
+fn as_built() -> ToyGate {
+    let mut truth = ToyGate::default();
+    truth.influence.iter_mut().for_each(|v| *v *= 1.04);
+    truth.local.iter_mut().for_each(|v| *v *= 0.94);
+    truth
+}
+
 /// Wall flexure through a lag: `k_g · L_τ(upper_pool − its mean)`, τ drawn from 12-72 h,
 /// `k_g` 0.3-0.6 microstrain per inch of pool.
-fn lagged_wall(seed: u64) -> (f64, FieldRecord) {
+fn lagged_wall(truth: &ToyGate, seed: u64) -> (f64, FieldRecord) {
     let mut rng = StdRng::seed_from_u64(seed);
     let tau = 12.0 + 60.0 * rng.random::<f64>();
     let k = coefficients(&mut rng, 0.3, 0.6);
-    let mut rec = record(base(seed, FieldEffects::default()));
+    let mut rec = truth_record(truth, seed);
     let mean = rec.upper_pool.iter().sum::<f64>() / rec.upper_pool.len() as f64;
     let pool: Vec<f64> = rec.upper_pool.iter().map(|p| p - mean).collect();
     let l = lag(&pool, tau);
@@ -60,11 +75,11 @@ fn lagged_wall(seed: u64) -> (f64, FieldRecord) {
 
 /// Sun on the gauges: `a_g · max(0, sin(2π (t − φ) / 24 h))`, peak phase φ drawn over the
 /// day, `a_g` 2-5 microstrain (a half-wave, not a sinusoid).
-fn solar(seed: u64) -> (f64, FieldRecord) {
+fn solar(truth: &ToyGate, seed: u64) -> (f64, FieldRecord) {
     let mut rng = StdRng::seed_from_u64(seed);
     let phase = 24.0 * rng.random::<f64>();
     let a = coefficients(&mut rng, 2.0, 5.0);
-    let mut rec = record(base(seed, FieldEffects::default()));
+    let mut rec = truth_record(truth, seed);
     let t0 = rec.time_unix_s[0];
     let hours: Vec<f64> = rec
         .time_unix_s
@@ -107,10 +122,14 @@ const SEEDS: std::ops::Range<u64> = 500..506;
 /// stays within 0.5 in of the truth (90 in; the prior is 160 in wide). The stand-in
 /// calibrator's gap sd (0.05-0.1 in) is not checked for coverage here: its intervals are not
 /// the product's (issue 15 measures those).
-fn check_named(label: &str, make: fn(u64) -> (f64, FieldRecord), expected: fn(&str) -> bool) {
+fn check_named(
+    label: &str,
+    make: fn(&ToyGate, u64) -> (f64, FieldRecord),
+    expected: fn(&str) -> bool,
+) {
     let mut named = 0;
     for seed in SEEDS {
-        let (x, rec) = make(seed);
+        let (x, rec) = make(&ToyGate::default(), seed);
         let out = run_with(&rec, Selection::default());
         summary(&format!("{label} seed {seed} (parameter {x:.2})"), &out);
         let r = &out.report;
@@ -155,4 +174,48 @@ fn sun_on_the_gauges_is_named_by_daily_harmonics() {
     check_named("solar", solar, |c| {
         c.starts_with("daily") || c.starts_with("semidaily")
     });
+}
+
+/// A reality of the as-built test: its label, its record maker and the check of the name.
+type Case = (
+    &'static str,
+    fn(&ToyGate, u64) -> (f64, FieldRecord),
+    fn(&str) -> bool,
+);
+
+/// The same two realities on the as-built gate ([`as_built`]): the residual then also carries
+/// a load-shaped misfit that the θ-only stand-in calibrator cannot remove and that no effect of
+/// the library is (the event tests' as-built case). Checked: the data-driven term is found and
+/// named by the right source first in all but at most one record per shape, and the
+/// test-window error falls. Not checked: the error reaching the noise or the gap (the as-built
+/// misfit stays in both, by construction). Measured: named 6 of 6 (wall, a lag of
+/// `upper_pool`) and 5 of 6 (sun; once `lockage_phase` first), test-window rmse 2.4-3.3 ->
+/// 0.99-1.04 with load-path hysteresis accepted beside it; the gap ends at 95.4-96.6 ± 0.05-0.08
+/// in for 90: the stand-in has no discrepancy to take the as-built misfit, so the gap does.
+#[test]
+fn both_undeclared_effects_are_named_on_an_as_built_gate() {
+    let wall = |c: &str| c.starts_with("lag") && c.ends_with("(upper_pool)");
+    let sun = |c: &str| c.starts_with("daily") || c.starts_with("semidaily");
+    let cases: [Case; 2] = [
+        ("as-built lagged wall", lagged_wall, wall),
+        ("as-built solar", solar, sun),
+    ];
+    let truth = as_built();
+    for (label, make, expected) in cases {
+        let mut named = 0;
+        for seed in SEEDS {
+            let (x, rec) = make(&truth, seed);
+            let out = run_with(&rec, Selection::default());
+            summary(&format!("{label} seed {seed} (parameter {x:.2})"), &out);
+            let r = &out.report;
+            let first = r
+                .effects
+                .iter()
+                .find(|e| e.name == "generic_covariate_term")
+                .map(|e| e.covariates[0].clone());
+            named += usize::from(first.as_deref().is_some_and(expected));
+            assert!(r.heldout_rmse_total_after < r.heldout_rmse_total_before);
+        }
+        assert!(named + 1 >= SEEDS.count(), "{label}: named {named} of 6");
+    }
 }
