@@ -12,8 +12,12 @@
 //! * `calculix-check [--element-size IN] [--dir DIR] [--ccx PATH] [--equation] [--report PATH]`:
 //!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
 //!   displacements (needs `ccx` on PATH; see docs/verification.md).
+//! * `bench [--filter TEXT] [--no-anchors] [--python PATH] [--anchors DIR] [--profile]
+//!   [--out PATH]`: criterion benchmarks and the Python peers in one run, as ratios in
+//!   `docs/benchmarks.md` (and a profile of the quick reproduction with `--profile`).
 
 mod adequacy;
+mod bench;
 mod calculix;
 mod coverage;
 mod plots;
@@ -60,6 +64,8 @@ enum Task {
     /// The adequacy verdict over realities that differ from the model (as-built gates, sensor
     /// faults) and its false-alarm rate on clean data.
     Adequacy(adequacy::AdequacyArgs),
+    /// Benchmarks and the Python peers in one run, written as ratios to docs/benchmarks.md.
+    Bench(bench::BenchArgs),
     /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
     CalculixCheck {
         /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
@@ -93,6 +99,7 @@ fn main() -> Result<()> {
         } => reproduce(quick, json, out, seed, no_sensitivity, sensitivity),
         Task::Coverage(args) => coverage::run(&args),
         Task::Adequacy(args) => adequacy::run(&args),
+        Task::Bench(args) => bench::run(&args),
         Task::CalculixCheck {
             element_size,
             dir,

@@ -128,6 +128,27 @@ pub struct LmlProblem {
     ws: Mutex<Workspace>,
 }
 
+impl Clone for LmlProblem {
+    /// The same problem with its own, empty workspace (buffers and factorisation cache): a
+    /// clone can be evaluated on another thread. The cache never changes a value (it only
+    /// skips refactorising at the same point), so a clone returns the same numbers.
+    fn clone(&self) -> Self {
+        Self {
+            kernel: self.kernel,
+            mean: self.mean,
+            noise: self.noise,
+            n: self.n,
+            d: self.d,
+            p: self.p,
+            x: self.x.clone(),
+            y: self.y.clone(),
+            h: self.h.clone(),
+            half_logdet_hth: self.half_logdet_hth,
+            ws: Mutex::new(self.fresh_workspace()),
+        }
+    }
+}
+
 impl std::fmt::Debug for LmlProblem {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LmlProblem")
@@ -202,6 +223,15 @@ impl LmlProblem {
             half_logdet_hth,
             ws: Mutex::new(ws),
         })
+    }
+
+    /// Empty buffers for this problem's size and kernel.
+    fn fresh_workspace(&self) -> Workspace {
+        Workspace::new(
+            self.n,
+            self.p,
+            matches!(self.kernel, Kernel::Matern52 { .. }),
+        )
     }
 
     /// Number of optimised log parameters: `1 + n_length_scales + (1 if noise estimated)`.

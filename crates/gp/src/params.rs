@@ -8,6 +8,7 @@ use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
 use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Box bounds on the hyper-parameters, in **standardised** units (inputs scaled to unit
@@ -194,7 +195,9 @@ impl GpParams {
 
     /// Fits the GP by ML-II: standardises `x` (`n × d`, rows are points) and `y`, maximises the
     /// restricted log marginal likelihood (see [`LmlProblem`]) from the default start and
-    /// `restarts` random starts with L-BFGS, and keeps the best.
+    /// `restarts` random starts with L-BFGS, and keeps the best. The starts run in parallel
+    /// on rayon's current thread pool (`RAYON_NUM_THREADS`, or a pool you `install`); the
+    /// result is the same for any number of threads.
     ///
     /// ```
     /// use nalgebra::DMatrix;
@@ -207,12 +210,21 @@ impl GpParams {
     pub fn fit(&self, x: &DMatrix<f64>, y: &[f64]) -> Result<GpModel, GpError> {
         let (scaling, xs, problem, noise) = self.prepare(x, y)?;
         let (lower, upper) = self.log_bounds(x.ncols());
-        let bounded = BoundedLml::new(&problem, lower.clone(), upper.clone())?;
+        BoundedLml::new(&problem, lower.clone(), upper.clone())?; // checks the bounds once
         let n = x.nrows() as f64;
+        // Starts run in parallel, each on its own clone of the problem (its own buffers and
+        // factorisation cache), so a start's result depends neither on the thread nor on
+        // the order; `collect` keeps the starts' order, so the best start is the same too.
         let reports: Vec<StartReport> = self
             .starts(x.ncols(), &lower, &upper)
-            .into_iter()
-            .map(|theta0| self.run_start(&bounded, theta0, n))
+            .into_par_iter()
+            .map(|theta0| {
+                let own = problem.clone();
+                match BoundedLml::new(&own, lower.clone(), upper.clone()) {
+                    Ok(bounded) => self.run_start(&bounded, theta0, n),
+                    Err(e) => StartReport::failed(theta0, e.to_string()),
+                }
+            })
             .collect();
         let best = reports
             .iter()
@@ -392,8 +404,8 @@ impl GpParams {
     }
 }
 
-/// Borrowing adaptor so the same [`BoundedLml`] (and its factorisation cache) serves every
-/// start.
+/// Borrowing adaptor so one [`BoundedLml`] (and its factorisation cache) serves every
+/// iteration of a start.
 struct BoundedRef<'a, 'b>(&'a BoundedLml<'b>);
 
 impl argmin::core::CostFunction for BoundedRef<'_, '_> {

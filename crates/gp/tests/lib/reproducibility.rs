@@ -112,3 +112,33 @@ fn the_jitter_ladder_gives_the_recorded_jitter_and_numbers() {
     let xs = DMatrix::from_row_slice(6, 1, &[0.5, 1.0, 1.5, 2.5, 3.5, 5.0]);
     assert_same(&fx["jitter_ladder"], &m, &xs, "jitter_ladder");
 }
+
+#[test]
+fn parallel_restarts_give_the_same_fit_on_one_thread_and_on_four() {
+    // The restarts run on rayon's pool, each on its own copy of the likelihood problem: the
+    // fit must not depend on how many threads run them or in which order they finish.
+    let (x, y) = data(40, 2, 1);
+    let fit_on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| GpParams::new().restarts(5).seed(11).fit(&x, &y).unwrap())
+    };
+    let (one, four) = (fit_on(1), fit_on(4));
+    let bits = |m: &GpModel| {
+        let d = m.diagnostics();
+        let mut v: Vec<u64> = d
+            .starts
+            .iter()
+            .flat_map(|s| s.final_log_params.clone().unwrap_or_default())
+            .chain(d.starts.iter().filter_map(|s| s.lml))
+            .map(f64::to_bits)
+            .collect();
+        v.push(d.best_start as u64);
+        v.push(m.log_marginal_likelihood().to_bits());
+        v
+    };
+    assert_eq!(one.diagnostics().starts.len(), 6);
+    assert_eq!(bits(&one), bits(&four));
+}

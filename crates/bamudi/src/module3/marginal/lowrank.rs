@@ -190,6 +190,9 @@ fn gram(factors: &[DMatrix<f64>], b: &DMatrix<f64>, offsets: &[usize]) -> DMatri
 #[derive(Debug, Clone)]
 pub struct Spectrum {
     q: DMatrix<f64>,
+    /// `Qᵀ`, kept so that [`Spectrum::rotate`] is one blocked product (nalgebra's `tr_mul`
+    /// takes a dot product per entry and streams `Q` once per column of its argument).
+    qt: DMatrix<f64>,
     lambda: DVector<f64>,
 }
 
@@ -199,13 +202,14 @@ impl Spectrum {
         let eig = SymmetricEigen::new(&lr.wtw, "WᵀW of the marginal covariance")?;
         Ok(Self {
             lambda: eig.values.map(|v| v.max(0.0)),
+            qt: eig.vectors.transpose(),
             q: eig.vectors,
         })
     }
 
     /// `Qᵀ z`.
     pub fn rotate(&self, z: &DMatrix<f64>) -> DMatrix<f64> {
-        self.q.tr_mul(z)
+        &self.qt * z
     }
 
     /// `ln |V|` for `N_s` observations.
