@@ -14,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::time::SystemTime;
 
 /// Start marker of the generated section.
 pub const BEGIN: &str = "<!-- xtask-bench:begin -->";
@@ -55,8 +56,9 @@ pub enum Anchor {
 /// Runs the task.
 pub fn run(args: &BenchArgs) -> Result<()> {
     let started = std::time::Instant::now();
+    let run_began = std::time::SystemTime::now();
     run_criterion(args.filter.as_deref())?;
-    let medians = criterion_medians(Path::new("target/criterion"))?;
+    let medians = criterion_medians(Path::new("target/criterion"), run_began)?;
     let anchors = match args.no_anchors {
         true => BTreeMap::new(),
         false => run_anchors(&args.python, &args.anchors),
@@ -66,8 +68,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         false => None,
     };
     let section = render(&medians, &anchors, profile.as_deref(), started.elapsed());
-    let doc = std::fs::read_to_string(&args.out).unwrap_or_default();
-    write_atomically(&args.out, &replace_section(&doc, &section))?;
+    let doc = match std::fs::read_to_string(&args.out) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        read => read.with_context(|| format!("reading {}", args.out.display()))?,
+    };
+    bamudi::data::write_atomic(&args.out, replace_section(&doc, &section).as_bytes())?;
     eprintln!("bench: wrote {}", args.out.display());
     Ok(())
 }
@@ -94,17 +99,22 @@ fn run_criterion(filter: Option<&str>) -> Result<()> {
     Ok(())
 }
 
-/// Criterion's median (ns per iteration) of every benchmark under `root`, keyed `group/id`.
-pub fn criterion_medians(root: &Path) -> Result<BTreeMap<String, f64>> {
+/// Criterion's median (ns per iteration) of every benchmark under `root` whose estimates were
+/// written at or after `since`, keyed `group/id`: results of earlier runs (benchmarks a
+/// `--filter` left out) are not mixed into this run's ratios.
+pub fn criterion_medians(root: &Path, since: SystemTime) -> Result<BTreeMap<String, f64>> {
     let mut out = BTreeMap::new();
     let groups = std::fs::read_dir(root)
         .with_context(|| format!("reading criterion results in {}", root.display()))?;
     for group in groups.flatten().filter(|e| e.path().is_dir()) {
         for bench in std::fs::read_dir(group.path())?.flatten() {
             let file = bench.path().join("new").join("estimates.json");
-            let Ok(text) = std::fs::read_to_string(&file) else {
-                continue; // criterion's own report directory, or a benchmark never run
-            };
+            let written = std::fs::metadata(&file).and_then(|m| m.modified());
+            if !written.is_ok_and(|t| t >= since) {
+                continue; // criterion's own report directory, or not run this time
+            }
+            let text = std::fs::read_to_string(&file)
+                .with_context(|| format!("reading {}", file.display()))?;
             let ns = median_ns(&text).with_context(|| format!("reading {}", file.display()))?;
             let key = format!(
                 "{}/{}",
@@ -365,14 +375,6 @@ pub fn replace_section(doc: &str, section: &str) -> String {
     }
 }
 
-/// Writes `text` to `path` through a temporary file in the same directory and a rename, so
-/// that a failure leaves the old file whole.
-pub fn write_atomically(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension("md.tmp");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("replacing {}", path.display()))
-}
-
 /// The profile section: `perf record` on `reproduce-paper --quick`, as a table of inclusive
 /// shares; a note instead when `perf` is missing or fails.
 fn profile_reproduction() -> String {
@@ -508,6 +510,28 @@ mod tests {
         assert_eq!(median_ns(json).unwrap(), 1500.5);
         let err = median_ns(r#"{"mean":{"point_estimate":2.0}}"#).unwrap_err();
         assert!(err.to_string().contains("median.point_estimate"), "{err}");
+    }
+
+    #[test]
+    fn only_medians_written_in_this_run_are_read() {
+        let root = std::env::temp_dir().join(format!("xtask-bench-test-{}", std::process::id()));
+        let json = r#"{"median":{"point_estimate":7.0}}"#;
+        for id in ["old", "fresh"] {
+            let dir = root.join("g").join(id).join("new");
+            std::fs::create_dir_all(&dir).unwrap();
+            std::fs::write(dir.join("estimates.json"), json).unwrap();
+        }
+        let since = SystemTime::now() - std::time::Duration::from_secs(60);
+        let old = std::fs::File::options()
+            .write(true)
+            .open(root.join("g/old/new/estimates.json"))
+            .unwrap();
+        old.set_modified(since - std::time::Duration::from_secs(3600))
+            .unwrap();
+        let medians = criterion_medians(&root, since).unwrap();
+        std::fs::remove_dir_all(&root).unwrap();
+        assert_eq!(medians.keys().collect::<Vec<_>>(), ["g/fresh"]);
+        assert_eq!(medians["g/fresh"], 7.0);
     }
 
     #[test]

@@ -210,22 +210,19 @@ impl GpParams {
     pub fn fit(&self, x: &DMatrix<f64>, y: &[f64]) -> Result<GpModel, GpError> {
         let (scaling, xs, problem, noise) = self.prepare(x, y)?;
         let (lower, upper) = self.log_bounds(x.ncols());
-        BoundedLml::new(&problem, lower.clone(), upper.clone())?; // checks the bounds once
         let n = x.nrows() as f64;
         // Starts run in parallel, each on its own clone of the problem (its own buffers and
         // factorisation cache), so a start's result depends neither on the thread nor on
         // the order; `collect` keeps the starts' order, so the best start is the same too.
-        let reports: Vec<StartReport> = self
+        let reports = self
             .starts(x.ncols(), &lower, &upper)
             .into_par_iter()
             .map(|theta0| {
                 let own = problem.clone();
-                match BoundedLml::new(&own, lower.clone(), upper.clone()) {
-                    Ok(bounded) => self.run_start(&bounded, theta0, n),
-                    Err(e) => StartReport::failed(theta0, e.to_string()),
-                }
+                let bounded = BoundedLml::new(&own, lower.clone(), upper.clone())?;
+                Ok(self.run_start(&bounded, theta0, n))
             })
-            .collect();
+            .collect::<Result<Vec<StartReport>, GpError>>()?;
         let best = reports
             .iter()
             .enumerate()
