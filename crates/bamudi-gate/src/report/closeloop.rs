@@ -1,7 +1,9 @@
 //! The close loop's report on a gate record: `report.md`, `results.json` and SVG plots.
 
 use super::calibration::{ReportInputs, inputs_markdown};
-use super::plot::{AFTER, Axes, BAND, BEFORE, Series, draw_legend, line_plot, svg_figure, tick};
+use super::plot::{
+    AFTER, ALARM, Axes, BAND, BEFORE, Series, draw_legend, line_plot, svg_figure, tick,
+};
 use crate::error::{GateAppError, Result};
 use crate::record_fatigue::RecordFatigue;
 use bamudi::closeloop::{CloseLoopOutcome, CloseLoopReport};
@@ -27,7 +29,7 @@ pub fn markdown(r: &CloseLoopReport) -> String {
         s,
         "{} rows: {} calibration, {} validation from day {:.1} (rolling origins at days {}), {test}; \
          the before/after error is on the {} window{}. {} rows dropped and {} cells imputed for missing gauge values; \
-         white-noise sd from first differences {:.3} microstrain.\n",
+         white-noise sd from first differences {:.3} microstrain. Wall time of the loop: {:.1} s.\n",
         r.n_rows,
         r.n_calibration,
         r.n_validation,
@@ -40,7 +42,8 @@ pub fn markdown(r: &CloseLoopReport) -> String {
         },
         r.dropped_missing,
         r.imputed,
-        r.noise_sd_estimate
+        r.noise_sd_estimate,
+        r.wall_time_s
     );
     let _ = writeln!(s, "**Conclusion:** {}\n", r.conclusion);
     for (when, a) in [
@@ -98,25 +101,57 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
     );
 }
 
-/// The whole-record event scan: every change of level left in a gauge's residual.
+/// Every alarm in one table (the gauges' changes of level and the gap's change alarm), then
+/// the event scan's details.
 fn alarms_section(s: &mut String, r: &CloseLoopReport) {
+    if r.events.is_none() && r.theta_track.is_none() {
+        return;
+    }
+    let _ = writeln!(s, "## Alarms\n");
+    if r.alarms.is_empty() {
+        let _ = writeln!(
+            s,
+            "No alarm: no change of level in any gauge's residual and no change of the gap.\n"
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "| what | change | onset (day) | onset 95 % (day) | size | raised (day) |\n|---|---|---|---|---|---|"
+        );
+        for a in &r.alarms {
+            let (what, unit) = match a.subject.as_str() {
+                "parameter" => ("gap".to_string(), "in"),
+                g => (format!("gauge {g}"), a.unit.as_str()),
+            };
+            let _ = writeln!(
+                s,
+                "| {what} | {} | {:.2} | {:.2} – {:.2} | {:+.2} ± {:.2} {unit} | {} |",
+                a.change,
+                a.onset_day,
+                a.onset_day_interval.0,
+                a.onset_day_interval.1,
+                a.size,
+                a.size_sd,
+                a.raised_day
+                    .map_or("end of record".into(), |d| format!("{d:.2}"))
+            );
+        }
+        s.push('\n');
+    }
+    scan_details(s, r);
+}
+
+/// The whole-record event scan: every change of level left in a gauge's residual.
+fn scan_details(s: &mut String, r: &CloseLoopReport) {
     let Some(scan) = &r.events else {
         return;
     };
     let _ = writeln!(
         s,
-        "## Alarms
-
-{}.
-",
-        scan.method
+        "Gauges: {} (levels held at least {} rows; intervals at {}).\n",
+        scan.method, scan.config.min_segment_rows, scan.config.level
     );
     if scan.alarms.is_empty() {
-        let _ = writeln!(
-            s,
-            "No change of level in any gauge's residual (levels held at least {} rows; intervals at {}).\n",
-            scan.config.min_segment_rows, scan.config.level
-        );
         return;
     }
     let _ = writeln!(
@@ -166,11 +201,15 @@ fn track_section(s: &mut String, r: &CloseLoopReport) {
         Some(a) => {
             let _ = writeln!(
                 s,
-                "**Change alarm:** the gap's {} was detected on day {:.2}; estimated onset day {:.2} (delay {:.2} days; CUSUM threshold {:.2} sd, one false alarm per {:.0} windows in control).\n",
+                "**Change alarm:** the gap's {} was detected on day {:.2}; estimated onset day {:.2} (95 %: {:.2} – {:.2}; delay {:.2} days), size {:+.2} ± {:.2} in (CUSUM threshold {:.2} sd, one false alarm per {:.0} windows in control).\n",
                 a.direction,
                 a.day,
                 a.onset_day,
+                a.onset_day_interval.0,
+                a.onset_day_interval.1,
                 a.delay_days,
+                a.size,
+                a.size_sd,
                 t.cusum_h,
                 t.config.in_control_windows
             );
@@ -480,14 +519,45 @@ fn plot_track(t: &bamudi::closeloop::ThetaTrack, path: &Path) -> Result<()> {
     upper.dashed = true;
     let mut lower = Series::new("", BAND, pts(&|p| p.band95.0));
     lower.dashed = true;
-    let series = [
+    let mut series = vec![
         Series::scatter("window estimate", BEFORE, estimates),
         Series::new("smoothed gap", AFTER, pts(&|p| p.smoothed.0)),
         upper,
         lower,
     ];
+    series.extend(alarm_marks(t));
     let axes = Axes::new("Gap θ through the record", "time (days)", "gap θ (in)");
     line_plot(path, &axes, &series)
+}
+
+/// The change alarm as vertical lines over the band's range: the day it was raised (solid) and
+/// its onset's 95 % interval (dashed); none without an alarm.
+fn alarm_marks(t: &bamudi::closeloop::ThetaTrack) -> Vec<Series> {
+    let Some(a) = &t.alarm else {
+        return vec![];
+    };
+    let lo = t
+        .points
+        .iter()
+        .map(|p| p.band95.0)
+        .fold(f64::INFINITY, f64::min);
+    let hi = t
+        .points
+        .iter()
+        .map(|p| p.band95.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let vertical = |d: f64| vec![(d, lo), (d, hi)];
+    let raised = Series::new(
+        &format!("change alarm (day {:.1})", a.day),
+        ALARM,
+        vertical(a.day),
+    );
+    let (o0, o1) = a.onset_day_interval;
+    let mut first = Series::new("onset 95 % interval", ALARM, vertical(o0));
+    first.dashed = true;
+    let mut last = Series::new("", ALARM, vertical(o1));
+    last.dashed = true;
+    vec![raised, first, last]
 }
 
 /// The gap before and after the loop: mean and 95 % interval, one column each.

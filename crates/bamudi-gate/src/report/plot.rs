@@ -17,6 +17,8 @@ pub const AFTER: RGBColor = RGBColor(30, 90, 200);
 pub const BAND: RGBColor = RGBColor(120, 160, 230);
 /// The prior.
 pub const PRIOR: RGBColor = RGBColor(150, 150, 150);
+/// An alarm (a detected change) and its onset interval.
+pub const ALARM: RGBColor = RGBColor(255, 127, 14);
 /// Ten distinguishable colours (matplotlib's tab10) for series without a fixed meaning.
 pub const CATEGORICAL: [RGBColor; 10] = [
     RGBColor(31, 119, 180),

@@ -135,6 +135,9 @@ fn fe_gate_clean_record_gets_no_effect_and_the_true_gap() {
     // 0.5 in: about twenty posterior sds (0.026 in measured), a tenth of the +5 in bias the paper's
     // prior-marginal coefficients gave on this gate
     assert!((r.theta_after.mean - TRUE_GAP).abs() < 0.5);
+    // nothing changed in this record: no gauge and no gap alarm (stop 30 measured none on
+    // this seed; the toy-gate clean records bound the rate, 0 of 20)
+    assert!(r.alarms.is_empty(), "false alarms: {:?}", r.alarms);
 }
 
 /// An event in the newest data, after the calibration window (the first 60 % of 60 days):

@@ -126,11 +126,12 @@ fn check_named(
     label: &str,
     make: fn(&ToyGate, u64) -> (f64, FieldRecord),
     expected: fn(&str) -> bool,
+    selection: Selection,
 ) {
     let mut named = 0;
     for seed in SEEDS {
         let (x, rec) = make(&ToyGate::default(), seed);
-        let out = run_with(&rec, Selection::default());
+        let out = run_with(&rec, selection);
         summary(&format!("{label} seed {seed} (parameter {x:.2})"), &out);
         let r = &out.report;
         let generic = r
@@ -162,18 +163,42 @@ fn check_named(
 /// 32-64 h for true 42-69 h), test-window rmse 0.98-1.05 (before 1.26-2.23).
 #[test]
 fn lagged_wall_flexure_is_named_by_a_lag_of_the_upper_pool() {
-    check_named("lagged wall", lagged_wall, |c| {
-        c.starts_with("lag") && c.ends_with("(upper_pool)")
-    });
+    check_named("lagged wall", lagged_wall, wall, Selection::default());
+}
+
+/// The first covariate of the lagged wall's data-driven term.
+fn wall(c: &str) -> bool {
+    c.starts_with("lag") && c.ends_with("(upper_pool)")
+}
+
+/// The first covariate of the sun's data-driven term.
+fn sun(c: &str) -> bool {
+    c.starts_with("daily") || c.starts_with("semidaily")
+}
+
+/// The same records and bars with the multi-task lasso selection (linfa's elastic net, the
+/// path re-fitted on every fold's training rows). Measured (2026-11-25): named 6/6 (wall) and
+/// 5/6 (sun), test-window rmse 0.98-1.05 and 1.00-1.06, gap within 0.4 in; more covariates
+/// beside the cause than stepwise BIC (see docs/closeloop.md). Ignored in the suite for CI
+/// time (about a minute on 2 cores); the engine's loop test of the same selection runs:
+/// `cargo test -p bamudi-gate --test lib group_lasso -- --ignored --nocapture`.
+#[test]
+#[ignore = "measurement of an optional selection (about a minute); run with --ignored"]
+fn group_lasso_cv_names_both_undeclared_effects() {
+    check_named(
+        "lagged wall (lasso)",
+        lagged_wall,
+        wall,
+        Selection::GroupLassoCv,
+    );
+    check_named("solar (lasso)", solar, sun, Selection::GroupLassoCv);
 }
 
 /// Measured: the first covariate is a daily or semi-daily harmonic in 5 of 6 records (one
 /// starts with `d_water_temp_f_per_h`), test-window rmse 1.00-1.05 (before 1.76-2.22).
 #[test]
 fn sun_on_the_gauges_is_named_by_daily_harmonics() {
-    check_named("solar", solar, |c| {
-        c.starts_with("daily") || c.starts_with("semidaily")
-    });
+    check_named("solar", solar, sun, Selection::default());
 }
 
 /// A reality of the as-built test: its label, its record maker and the check of the name.
@@ -194,8 +219,6 @@ type Case = (
 /// in for 90: the stand-in has no discrepancy to take the as-built misfit, so the gap does.
 #[test]
 fn both_undeclared_effects_are_named_on_an_as_built_gate() {
-    let wall = |c: &str| c.starts_with("lag") && c.ends_with("(upper_pool)");
-    let sun = |c: &str| c.starts_with("daily") || c.starts_with("semidaily");
     let cases: [Case; 2] = [
         ("as-built lagged wall", lagged_wall, wall),
         ("as-built solar", solar, sun),

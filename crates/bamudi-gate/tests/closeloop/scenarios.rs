@@ -230,8 +230,22 @@ fn report_files_are_written() {
         "heldout_rmse_after",
         "theta_before",
         "theta_after",
+        "error_window",
+        "events",
+        "theta_track",
+        "alarms",
+        "wall_time_s",
     ] {
         assert!(json.get(key).is_some(), "{key}");
+    }
+    assert!(json["wall_time_s"].as_f64().unwrap() > 0.0);
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    for section in [
+        "## Alarms",
+        "## Gap through the record",
+        "Wall time of the loop",
+    ] {
+        assert!(md.contains(section), "report.md lacks {section}");
     }
     assert!(out.report.dropped_missing > 0);
 }

@@ -270,6 +270,13 @@ pub struct CloseLoopReport {
     /// The parameter tracked through the record (`None` when disabled).
     #[serde(default)]
     pub theta_track: Option<ThetaTrack>,
+    /// Every alarm in one list for the operator, in order of onset: the gauges' changes of
+    /// level (from [`Self::events`]) and the gap's change (from [`Self::theta_track`]).
+    #[serde(default)]
+    pub alarms: Vec<AlarmSummary>,
+    /// Wall time of the whole loop on this record (s).
+    #[serde(default)]
+    pub wall_time_s: f64,
 }
 
 /// Result of [`close_loop`]: the report plus the residual series used for the plots.
@@ -320,6 +327,7 @@ pub fn close_loop_with(
         ));
     }
     cfg.check_columns(&rec.file, &rec.covariate_names)?;
+    let started = std::time::Instant::now();
     let w = Windows::of(rec, cfg)?;
     let feats = Features::new(rec, cfg.load.as_ref(), &cfg.column_units);
     let lp = Loop {
@@ -356,7 +364,9 @@ pub fn close_loop_with(
         steps,
         conclusion,
     };
-    outcome(&lp, rec, run)
+    let mut out = outcome(&lp, rec, run)?;
+    out.report.wall_time_s = started.elapsed().as_secs_f64();
+    Ok(out)
 }
 
 /// The record's rows in time order: the calibration window, the validation window (cut into
@@ -582,8 +592,14 @@ fn with_alarms(
     }
     if let Some(a) = track.and_then(|t| t.alarm.as_ref()) {
         found.push(format!(
-            "the parameter's track raises a change alarm: {} detected on day {:.2}, onset about day {:.2}",
-            a.direction, a.day, a.onset_day
+            "the parameter's track raises a change alarm: {} detected on day {:.2}, onset day {:.2} (95 %: {:.2} – {:.2}), size {:+.3} ± {:.3}",
+            a.direction,
+            a.day,
+            a.onset_day,
+            a.onset_day_interval.0,
+            a.onset_day_interval.1,
+            a.size,
+            a.size_sd
         ));
     }
     if found.is_empty() {
@@ -772,8 +788,10 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         conclusion,
         model_adequacy_before: before.adequacy,
         model_adequacy_after: st.model.adequacy().cloned(),
+        alarms: alarm_summaries(events.as_ref(), theta_track.as_ref(), &lp.cfg.output_unit),
         events,
         theta_track,
+        wall_time_s: 0.0,
     };
     Ok(CloseLoopOutcome {
         report,
@@ -794,4 +812,61 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
             .map(|e| e.plot_covariate.clone())
             .collect(),
     })
+}
+
+/// One alarm as the operator reads it: what changed, when, by how much.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct AlarmSummary {
+    /// What changed: a gauge's name, or `parameter` (the calibrated parameter θ; the gap of
+    /// the gate application).
+    pub subject: String,
+    /// `level change` (a gauge's residual), `increase` or `decrease` (the parameter).
+    pub change: String,
+    /// Estimated onset (days since the first row).
+    pub onset_day: f64,
+    /// 95 % interval of the onset (days).
+    pub onset_day_interval: (f64, f64),
+    /// Size of the change and its sd, in `unit`.
+    pub size: f64,
+    /// Sd of `size`.
+    pub size_sd: f64,
+    /// Unit of `size`: the gauges' output unit, or `parameter` (θ's own unit).
+    pub unit: String,
+    /// Day the parameter's CUSUM crossed its threshold; `None` for a gauge (the scan runs on the
+    /// whole record once).
+    pub raised_day: Option<f64>,
+}
+
+/// The gauges' and the gap's alarms in one list, by onset.
+fn alarm_summaries(
+    events: Option<&EventScan>,
+    track: Option<&ThetaTrack>,
+    unit: &str,
+) -> Vec<AlarmSummary> {
+    let gauges = events
+        .into_iter()
+        .flat_map(|e| &e.alarms)
+        .map(|a| AlarmSummary {
+            subject: a.gauge.clone(),
+            change: "level change".into(),
+            onset_day: a.onset_day,
+            onset_day_interval: a.onset_day_interval,
+            size: a.size,
+            size_sd: a.size_sd,
+            unit: unit.into(),
+            raised_day: None,
+        });
+    let gap = track.and_then(|t| t.alarm.as_ref()).map(|a| AlarmSummary {
+        subject: "parameter".into(),
+        change: a.direction.clone(),
+        onset_day: a.onset_day,
+        onset_day_interval: a.onset_day_interval,
+        size: a.size,
+        size_sd: a.size_sd,
+        unit: "parameter".into(),
+        raised_day: Some(a.day),
+    });
+    let mut all: Vec<AlarmSummary> = gauges.chain(gap).collect();
+    all.sort_by(|a, b| a.onset_day.total_cmp(&b.onset_day));
+    all
 }

@@ -151,7 +151,7 @@ fn units_and_selection_are_read_from_toml() {
     assert!(e.to_string().contains("generic_selection"), "{e}");
 }
 
-/// The cross-validated stepwise selection (an option, not the default) through the whole loop:
+/// The cross-validated selections (options, not the default) through the whole loop:
 /// sun on three gauges (a half-wave daily cycle peaking at 13 h, 3-5 microstrain; the toy
 /// record's air temperature is a pure daily sinusoid peaking elsewhere, plus a weekly cycle)
 /// is named by a daily-periodic candidate, and the test-window error falls to within 15 % of
@@ -164,13 +164,23 @@ fn units_and_selection_are_read_from_toml() {
 /// weather-like, keep the strict name check).
 #[test]
 fn stepwise_cv_names_sun_on_the_gauges_by_daily_harmonics() {
+    sun_is_named_by_a_daily_candidate(effects::Selection::StepwiseCv);
+}
+
+/// The same record with the multi-task lasso (linfa's elastic net) path re-fitted per fold.
+#[test]
+fn group_lasso_cv_names_sun_on_the_gauges_by_daily_harmonics() {
+    sun_is_named_by_a_daily_candidate(effects::Selection::GroupLassoCv);
+}
+
+fn sun_is_named_by_a_daily_candidate(selection: effects::Selection) {
     let amplitude = [0.0, 3.0, 0.0, -4.0, 5.0, 0.0, 0.0];
     let sun =
         |t: f64, g: usize| amplitude[g] * (std::f64::consts::TAU * (t - 7.0) / 24.0).sin().max(0.0);
     let rec = record_with(&ToyGate::default(), super::ROWS, 11, sun).unwrap();
     let cal = GridCalibrator::new(ToyGate::default(), (40.0, 200.0));
     let cfg = CloseLoopConfig {
-        generic_selection: effects::Selection::StepwiseCv,
+        generic_selection: selection,
         ..super::config()
     };
     let r = close_loop(&rec, &cal, &cfg).unwrap().report;

@@ -104,15 +104,28 @@ pub struct TrackPoint {
     pub band95: (f64, f64),
 }
 
-/// The sequential change alarm.
+/// The sequential change alarm, dated and sized by the single step that best explains the
+/// window estimates around it.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct TrackAlarm {
     /// Day the CUSUM crossed its threshold (end of that window).
     pub day: f64,
     /// `increase` or `decrease` of the parameter.
     pub direction: String,
-    /// Estimated onset: mid-time of the window after the CUSUM's last zero (days).
+    /// Estimated onset (days): the first row at the new level of the single step that best fits
+    /// the window estimates up to three days after the alarm (weighted least squares; a window
+    /// the step cuts is the row-weighted mix of both levels).
     pub onset_day: f64,
+    /// 95 % interval of the onset (days): the onsets whose log-likelihood is within 3.676 of
+    /// the best (the two-sided argmax law of `W(s) − |s|/2`, `(1 − e^{−x})² = 0.95`).
+    #[serde(default)]
+    pub onset_day_interval: (f64, f64),
+    /// Size of that step (parameter units): level after minus level before.
+    #[serde(default)]
+    pub size: f64,
+    /// Its sd (from the window estimates' sds, over-dispersion included).
+    #[serde(default)]
+    pub size_sd: f64,
     /// `day − onset_day`.
     pub delay_days: f64,
 }
@@ -226,6 +239,10 @@ pub(crate) fn track(inp: &TrackInput<'_>, cfg: &TrackConfig) -> Result<ThetaTrac
         .map(|rows| rows.iter().map(|&i| day(i)).sum::<f64>() / rows.len() as f64)
         .collect();
     let ends: Vec<f64> = windows.iter().map(|r| day(r[r.len() - 1])).collect();
+    let row_days: Vec<Vec<f64>> = windows
+        .iter()
+        .map(|rows| rows.iter().map(|&i| day(i)).collect())
+        .collect();
     let obs = ssm::Obs {
         est: &est,
         days: &days,
@@ -238,6 +255,7 @@ pub(crate) fn track(inp: &TrackInput<'_>, cfg: &TrackConfig) -> Result<ThetaTrac
     let filt = ssm::filter(&obs, &model);
     let smooth = ssm::smooth(&obs, &model, &filt);
     let (h, alarm) = change_alarm(&obs, prior, cfg, &ends);
+    let alarm = alarm.map(|a| dated(a, &obs, &row_days));
     let last = windows.len() - 1;
     let state_now = TrackState {
         day: days[last],
@@ -459,12 +477,115 @@ fn change_alarm(
                 day: window_end_day[w],
                 direction: direction.into(),
                 onset_day,
+                onset_day_interval: (onset_day, window_end_day[w]),
+                size: f64::NAN,
+                size_sd: f64::NAN,
                 delay_days: window_end_day[w] - onset_day,
             };
             return (h, Some(alarm));
         }
     }
     (h, None)
+}
+
+/// Half the log-likelihood-ratio bound of the onset's 95 % set: `P(sup_s W(s) − |s|/2 ≤ x)` is
+/// `(1 − e^{−x})²` for a two-sided Brownian motion, 0.95 at `x = −ln(1 − √0.95)`.
+const ONSET_LOGLIK_DROP: f64 = 3.676;
+
+/// Days after the alarm whose windows also date and size the step. An abrupt change is
+/// usually caught in the first window after it, which the change covers only in part; the
+/// next days give the size full windows, while a longer span would let a later change (or a
+/// growth going on) bend a single step.
+const DATING_DAYS_AFTER_ALARM: f64 = 3.0;
+
+/// The alarm dated and sized by the best single step in the window estimates up to
+/// [`DATING_DAYS_AFTER_ALARM`] after it (kept as the CUSUM gave it when no step can be fitted).
+fn dated(alarm: TrackAlarm, obs: &ssm::Obs<'_>, row_days: &[Vec<f64>]) -> TrackAlarm {
+    let upto = obs
+        .days
+        .iter()
+        .take_while(|&&d| d <= alarm.day + DATING_DAYS_AFTER_ALARM)
+        .count();
+    let pts: Vec<(&[f64], f64, f64)> = (0..upto)
+        .filter_map(|w| {
+            obs.est[w].map(|(m, sd)| (row_days[w].as_slice(), m, 1.0 / (sd * sd).max(1e-300)))
+        })
+        .collect();
+    let Some(step) = best_step(&pts) else {
+        return alarm;
+    };
+    TrackAlarm {
+        onset_day: step.onset,
+        onset_day_interval: step.interval,
+        size: step.size,
+        size_sd: step.size_sd,
+        delay_days: alarm.day - step.onset,
+        ..alarm
+    }
+}
+
+/// A single step in the window estimates: its onset (the first row at the new level) with the
+/// 95 % interval, its size and the size's sd.
+struct Step {
+    onset: f64,
+    interval: (f64, f64),
+    size: f64,
+    size_sd: f64,
+}
+
+/// The step whose onset, at a row's time, best fits `(row days, mean, weight)` per window:
+/// a window's estimate is `b` before the onset and `b + d` after it; a window the onset cuts
+/// is left free (its estimate mixes both levels through the model's nonlinear response, in no
+/// known proportion); weighted least squares in `(b, d)` per onset. The onset is the middle of
+/// the best onsets (those inside one cut window fit alike). `None` when no onset leaves
+/// windows on both sides.
+fn best_step(pts: &[(&[f64], f64, f64)]) -> Option<Step> {
+    let fit = |t0: f64| -> Option<(f64, f64, f64)> {
+        // weighted sums for the 2x2 normal equations of (b, d)
+        let (mut sw, mut sf, mut sff, mut sm, mut sfm, mut smm) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(rows, m, w) in pts {
+            let after = rows.iter().filter(|&&d| d >= t0).count();
+            if after != 0 && after != rows.len() {
+                continue;
+            }
+            let f = (after > 0) as u8 as f64;
+            (sw, sf, sff) = (sw + w, sf + w * f, sff + w * f * f);
+            (sm, sfm, smm) = (sm + w * m, sfm + w * f * m, smm + w * m * m);
+        }
+        let det = sw * sff - sf * sf;
+        if det <= 1e-12 * sw * sff.max(1e-300) {
+            return None;
+        }
+        let d = (sw * sfm - sf * sm) / det;
+        let b = (sm - d * sf) / sw;
+        let rss = smm - b * sm - d * sfm;
+        Some((rss, d, (sw / det).sqrt()))
+    };
+    let onsets: Vec<f64> = pts.iter().flat_map(|p| p.0.iter().copied()).collect();
+    let fits: Vec<(f64, (f64, f64, f64))> = onsets
+        .iter()
+        .filter_map(|&t0| fit(t0).map(|f| (t0, f)))
+        .collect();
+    let &(_, (best, size, size_sd)) = fits.iter().min_by(|a, b| a.1.0.total_cmp(&b.1.0))?;
+    let ties: Vec<f64> = fits
+        .iter()
+        .filter(|(_, f)| f.0 - best <= 1e-9 * best.abs().max(1.0))
+        .map(|(t0, _)| *t0)
+        .collect();
+    let onset = 0.5 * (ties[0] + ties[ties.len() - 1]);
+    let inside = fits
+        .iter()
+        .filter(|(_, f)| (f.0 - best) / 2.0 <= ONSET_LOGLIK_DROP)
+        .map(|(t0, _)| *t0);
+    let interval = inside.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+        (lo.min(t), hi.max(t))
+    });
+    Some(Step {
+        onset,
+        interval,
+        size,
+        size_sd,
+    })
 }
 
 /// The CUSUM threshold whose one-sided in-control average run length is `arl` (Siegmund's
