@@ -114,7 +114,7 @@ pub struct TrackAlarm {
     pub direction: String,
     /// Estimated onset (days): the first row at the new level of the single step that best fits
     /// the window estimates up to three days after the alarm (weighted least squares; a window
-    /// the step cuts is the row-weighted mix of both levels).
+    /// the step cuts is left free; the middle of the onsets that fit best).
     pub onset_day: f64,
     /// 95 % interval of the onset (days): the onsets whose log-likelihood is within 3.676 of
     /// the best (the two-sided argmax law of `W(s) − |s|/2`, `(1 − e^{−x})² = 0.95`).
