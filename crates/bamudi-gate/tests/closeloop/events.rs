@@ -155,9 +155,7 @@ fn clean_records_raise_at_most_one_alarm_in_twenty() {
 /// within a day in at least 9, with at most 1 record alarming on another gauge.
 #[test]
 fn late_steps_are_found_on_an_as_built_gate() {
-    let mut truth = ToyGate::default();
-    truth.influence.iter_mut().for_each(|v| *v *= 1.04);
-    truth.local.iter_mut().for_each(|v| *v *= 0.94);
+    let truth = as_built();
     let mut rng = StdRng::seed_from_u64(34);
     let (mut dated, mut elsewhere) = (0, 0);
     for seed in 340..350 {

@@ -50,15 +50,6 @@ fn truth_record(truth: &ToyGate, seed: u64) -> FieldRecord {
     simulate(&cfg, &|hu, hd, gap| truth.strain(hu, hd, gap)).unwrap()
 }
 
-/// The gate as built: influence lines 4 % stronger and local bending 6 % weaker on every gauge
-/// than the drawing the loop calibrates (the as-built gate of the event tests).
-fn as_built() -> ToyGate {
-    let mut truth = ToyGate::default();
-    truth.influence.iter_mut().for_each(|v| *v *= 1.04);
-    truth.local.iter_mut().for_each(|v| *v *= 0.94);
-    truth
-}
-
 /// Wall flexure through a lag: `k_g · L_τ(upper_pool − its mean)`, τ drawn from 12-72 h,
 /// `k_g` 0.3-0.6 microstrain per inch of pool.
 fn lagged_wall(truth: &ToyGate, seed: u64) -> (f64, FieldRecord) {
