@@ -8,8 +8,13 @@ use bamudi::closeloop::ThetaTrack;
 
 /// The record of `seed` with its gap following `path(day)` instead of the constant 90 in.
 fn with_gap_path(seed: u64, path: &dyn Fn(f64) -> f64) -> FieldRecord {
-    let mut rec = record(base(seed, FieldEffects::default()));
-    let gate = ToyGate::default();
+    with_gap_path_on(&ToyGate::default(), seed, path)
+}
+
+/// The same with `gate` as the truth.
+fn with_gap_path_on(gate: &ToyGate, seed: u64, path: &dyn Fn(f64) -> f64) -> FieldRecord {
+    let cfg = base(seed, FieldEffects::default());
+    let mut rec = simulate(&cfg, &|hu, hd, gap| gate.strain(hu, hd, gap)).unwrap();
     let t0 = rec.time_unix_s[0];
     for row in 0..rec.time_unix_s.len() {
         let day = (rec.time_unix_s[row] - t0) as f64 / 86_400.0;
@@ -186,4 +191,37 @@ fn a_sudden_opening_raises_the_alarm_within_days() {
         misses <= 2,
         "{misses} of 14 onset/size intervals miss the truth"
     );
+}
+
+/// The same openings on a gate that differs from the one the loop calibrates ([`as_built`]):
+/// the residual carries a load-shaped misfit the stand-in calibrator cannot remove, and its gap
+/// is biased (the feature tests measured 95-97 in for 90). Checked for openings of 15 in on days
+/// 40, 45 and 50 (seeds 430-432): the alarm says "increase" within 3 days after the opening and
+/// its 95 % onset interval holds the opening day, in every record (bound set before the first
+/// run). The size and the gap now are not checked: the as-built misfit moves the level of θ.
+/// Measured: onsets 39.5, 44.5, 50.5 with intervals of about two days holding 40, 45, 50;
+/// sizes 14.6 ± 0.18 and 14.4 ± 0.29 in (true 15: the second misses its 95 % interval), and
+/// 7.7 ± 0.28 in for the day-40 opening — a confidently wrong size on the as-built gate, left
+/// as a finding.
+#[test]
+fn a_sudden_opening_on_an_as_built_gate_is_dated() {
+    let truth = as_built();
+    for (at, seed) in [(40.0, 430), (45.0, 431), (50.0, 432)] {
+        let path = move |d: f64| if d < at { 90.0 } else { 105.0 };
+        let out = run(&with_gap_path_on(&truth, seed, &path));
+        let t = track_of(&out);
+        eprintln!(
+            "as-built opening at day {at} (seed {seed}): alarm {:?}",
+            t.alarm
+        );
+        let a = t.alarm.as_ref().expect("an alarm");
+        assert!(
+            a.direction == "increase" && a.day >= at && a.day - at <= 3.0,
+            "{a:?}"
+        );
+        assert!(
+            a.onset_day_interval.0 <= at && at <= a.onset_day_interval.1,
+            "{a:?}"
+        );
+    }
 }
