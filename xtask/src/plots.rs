@@ -79,9 +79,10 @@ pub fn scenario_plots(
             opts.n_experiments, res.name, res.theta_true
         ),
         gate: "embedded default gate".into(),
-        element_size_in: opts
-            .mesh_element_size
-            .unwrap_or(mitergate::GateConfig::default().mesh.element_size),
+        element_size_in: Some(
+            opts.mesh_element_size
+                .unwrap_or(mitergate::GateConfig::default().mesh.element_size),
+        ),
         gap_prior_in: model.prior.bounds()[0],
         seed: opts.seed,
         theta_true: Some(res.theta_true),

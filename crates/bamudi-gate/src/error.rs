@@ -36,6 +36,9 @@ pub enum GateAppError {
     /// An option of a study or a command is invalid (the message names it).
     #[error("invalid option: {0}")]
     Option(String),
+    /// An input is invalid; the message names the file, key or column and what is wrong.
+    #[error("{0}")]
+    Invalid(String),
     /// (De)serialisation failed.
     #[error("{context}: {reason}")]
     Serde {

@@ -23,8 +23,9 @@ pub fn build(cfg: &GateConfig) -> Result<(ContactModel, GateSummary, f64)> {
 /// `predict` uses exactly the same gate, prior and discrepancy basis without rebuilding.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SavedModel {
-    /// The gate configuration the contact model was built from.
-    pub gate: GateConfig,
+    /// The gate configuration the contact model was built from (`None` for an imported
+    /// deck: the contact model holds everything a prediction needs).
+    pub gate: Option<GateConfig>,
     /// The condensed gate with its contact parameters.
     pub contact: ContactModel,
     /// Uniform prior of the gap θ (in).

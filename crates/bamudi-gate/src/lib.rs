@@ -9,6 +9,8 @@
 //! * [`report`]: `results.json`, `report.md` and SVG plots of a calibration and of a close-loop
 //!   run;
 //! * [`output`]: results directories written atomically (staging directory, then rename);
+//! * [`session`]: what the command line and the Python package share (the calibration
+//!   specification, experiments from a table, the calibration, synthetic experiments);
 //! * [`progress`]: the engine's observer events as indicatif progress bars, and a stderr logger
 //!   for the `log` facade;
 //! * the `bamudi` command line (`src/main.rs`, see `docs/cli.md`).
@@ -30,5 +32,6 @@ pub mod physics;
 pub mod progress;
 pub mod record_fatigue;
 pub mod report;
+pub mod session;
 
 pub use error::{GateAppError, Result};

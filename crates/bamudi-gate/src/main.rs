@@ -4,9 +4,11 @@
 //! * `simulate field` — a months-long field record (pools, lockages, temperatures, effects);
 //! * `calibrate` — BA-MUDI Modules 2-3 from a TOML configuration and a CSV of experiments;
 //! * `predict` — Module 4 (strains with 95 % bands, quoin forces CSV) from a saved calibration;
-//! * `close-loop` — find the effects a calibration misses in a field record.
+//! * `close-loop` — find the effects a calibration misses in a field record;
+//! * `export-gate` — the gate as a finite-element deck (`.inp`) with its import spec.
 //!
-//! Every command works on the embedded default gate unless `--gate gate.toml` is given.
+//! Every command works on the embedded default gate unless `--gate gate.toml` (or a deck:
+//! `--gate-inp deck.inp --import-spec spec.toml`) is given.
 mod cli;
 
 use anyhow::{Context, Result};
@@ -48,6 +50,8 @@ enum Cmd {
     Predict(cli::predict::PredictArgs),
     /// Close the loop on a field record: find, add and report the missing effects.
     CloseLoop(cli::closeloop::CloseLoopCmd),
+    /// Write the gate as a finite-element deck (.inp) with its import spec (for --gate-inp).
+    ExportGate(cli::export::ExportArgs),
 }
 
 /// Prints an error as one line of its causes (`error: outer: inner: ...`), without the
@@ -78,6 +82,7 @@ fn run(cli: Cli) -> Result<()> {
         Cmd::Calibrate(a) => cli::calibrate::run(a, &cli.gate, cli.seed),
         Cmd::Predict(a) => cli::predict::run(a),
         Cmd::CloseLoop(a) => cli::closeloop::run(a, &cli.gate, cli.seed),
+        Cmd::ExportGate(a) => cli::export::run(a, &cli.gate),
     }
 }
 
@@ -87,6 +92,8 @@ fn refuse_unused_flags(cli: &Cli) -> Result<()> {
     let unused = [
         ("--gate", cli.gate.gate.is_some()),
         ("--element-size", cli.gate.element_size.is_some()),
+        ("--gate-inp", cli.gate.gate_inp.is_some()),
+        ("--import-spec", cli.gate.import_spec.is_some()),
         ("--seed", cli.seed.is_some()),
         ("--threads", cli.threads.is_some()),
     ];

@@ -463,15 +463,30 @@ impl Calibration {
             path: path.display().to_string(),
             source: e,
         })?;
-        let cal: Self = serde_json::from_str(&text).map_err(|e| BamudiError::Serde {
-            context: path.display().to_string(),
+        Self::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// The calibration of JSON text written by [`save`](Self::save) or
+    /// [`to_json_string`](Self::to_json_string); `context` names it in errors; its
+    /// configuration is checked again.
+    pub fn from_json_str(text: &str, context: &str) -> Result<Self> {
+        let cal: Self = serde_json::from_str(text).map_err(|e| BamudiError::Serde {
+            context: context.to_string(),
             reason: e.to_string(),
         })?;
         cal.validate().map_err(|reason| BamudiError::Serde {
-            context: path.display().to_string(),
+            context: context.to_string(),
             reason,
         })?;
         Ok(cal)
+    }
+
+    /// The JSON text [`save`](Self::save) writes.
+    pub fn to_json_string(&self) -> Result<String> {
+        serde_json::to_string(self).map_err(|e| BamudiError::Serde {
+            context: "calibration".into(),
+            reason: e.to_string(),
+        })
     }
 
     /// Consistency of a loaded calibration (sizes, a positive `σ_ε`).

@@ -1,6 +1,6 @@
 //! `bamudi close-loop`: the close-the-loop workflow on a field record with the BA-MUDI
 //! calibrator of the gate.
-use super::{GateArgs, build_contact, gate_config};
+use super::{GateArgs, build_gate, gate_source};
 use anyhow::{Context, Result};
 use bamudi::CalibrationConfig;
 use bamudi::closeloop::{
@@ -13,6 +13,7 @@ use bamudi_gate::output::StagedDir;
 use bamudi_gate::progress::Bars;
 use bamudi_gate::record_fatigue::{self, RecordFatigue, RecordFatigueOptions, record_fatigue};
 use bamudi_gate::report::calibration::ReportInputs;
+use bamudi_gate::session::GateSource;
 use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::UnobservableModel;
 use std::path::PathBuf;
@@ -91,14 +92,14 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     }
     let cfg = loop_config(c)?;
     let cal_cfg = calibration_config(c)?;
-    let gate_cfg = gate_config(gate_args)?;
-    let top = gate_cfg.geometry.quoin_height;
-    anyhow::ensure!(
-        hi < top,
-        "--gap-prior {lo},{hi}: the upper bound must lie below the quoin height {top} in"
-    );
+    let source = gate_source(gate_args)?;
+    if let GateSource::Config(cfg) = &source {
+        check_prior_below(lo, hi, cfg.geometry.quoin_height)?;
+    }
     let staged = StagedDir::prepare("--out", &c.out, c.force)?;
-    let contact = build_contact(&gate_cfg)?;
+    let built = build_gate(&source)?;
+    let contact = built.contact;
+    check_prior_below(lo, hi, contact.gate().quoin_height)?;
     let bars: Arc<dyn Observer + Send + Sync> = Arc::new(Bars::new());
     let calibrator = calibrator(c, cal_cfg, contact, (lo, hi), seed)?.observer(bars);
     let model = calibrator.model();
@@ -115,11 +116,8 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
             .as_ref()
             .map_or("close-loop defaults".into(), |p| p.display().to_string()),
         data: c.data.display().to_string(),
-        gate: gate_args
-            .gate
-            .as_ref()
-            .map_or("embedded default gate".into(), |g| g.display().to_string()),
-        element_size_in: gate_cfg.mesh.element_size,
+        gate: gate_args.label(),
+        element_size_in: built.element_size,
         gap_prior_in: (lo, hi),
         seed: calibrator.calibration_config().seed,
         theta_true: None,
@@ -141,6 +139,15 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     print_summary(&out.report);
     println!("{}", record_fatigue::summary(&fatigue));
     println!("report in {}", dir.display());
+    Ok(())
+}
+
+/// The gap prior's upper bound must lie below the quoin height `top` (in).
+fn check_prior_below(lo: f64, hi: f64, top: f64) -> Result<()> {
+    anyhow::ensure!(
+        hi < top,
+        "--gap-prior {lo},{hi}: the upper bound must lie below the quoin height {top} in"
+    );
     Ok(())
 }
 
@@ -218,23 +225,9 @@ fn calibrator(
     prior: (f64, f64),
     seed: Option<u64>,
 ) -> Result<GateCalibrator> {
-    let mut calibrator =
-        GateCalibrator::new(contact, prior)?.max_experiments(c.max_experiments as usize);
-    if let Some(cfg) = config {
-        calibrator = calibrator.config(cfg);
-    }
-    if let Some(sd) = c.gauge_noise_sd {
-        calibrator = calibrator.gauge_noise_sd(sd).context("--gauge-noise-sd")?;
-    }
-    if let Some(s) = seed {
-        let params = calibrator
-            .calibration_config()
-            .clone()
-            .into_params()
-            .seed(s);
-        calibrator = calibrator.config(params.check()?);
-    }
-    Ok(calibrator)
+    let (max, sd) = (c.max_experiments as usize, c.gauge_noise_sd);
+    bamudi_gate::session::gate_calibrator(contact, prior, max, sd, config, seed)
+        .context("setting up the close loop's calibrator")
 }
 
 fn print_summary(report: &CloseLoopReport) {

@@ -1,11 +1,13 @@
 //! Subcommand implementations of the `bamudi` binary and what they share: the gate (Module 1).
 pub mod calibrate;
 pub mod closeloop;
+pub mod export;
 pub mod predict;
 pub mod simulate;
 
 use anyhow::{Context, Result};
-use mitergate::{ContactModel, GateConfig};
+use bamudi_gate::session::{BuiltGate, GateSource};
+use mitergate::GateConfig;
 use std::path::PathBuf;
 
 /// Gate selection, shared by every subcommand.
@@ -19,6 +21,27 @@ pub struct GateArgs {
     #[arg(long, global = true, allow_negative_numbers = true,
           value_parser = number_in(0.0, 240.0, Bound::Open, "in"))]
     pub element_size: Option<f64>,
+    /// Your own gate as a finite-element deck (Abaqus / CalculiX `.inp`), with
+    /// `--import-spec` (docs/mitergate.md, "Bring your own gate"); instead of `--gate`.
+    #[arg(long, global = true, requires = "import_spec", conflicts_with_all = ["gate", "element_size"])]
+    pub gate_inp: Option<PathBuf>,
+    /// The import spec (TOML) of `--gate-inp`: where the deck's quoin, wetted skin and gauges
+    /// are.
+    #[arg(long, global = true, requires = "gate_inp")]
+    pub import_spec: Option<PathBuf>,
+}
+
+impl GateArgs {
+    /// How the gate is named in reports: the file(s) it came from.
+    pub fn label(&self) -> String {
+        match (&self.gate, &self.gate_inp, &self.import_spec) {
+            (_, Some(inp), Some(spec)) => {
+                format!("{} (import spec {})", inp.display(), spec.display())
+            }
+            (Some(g), _, _) => g.display().to_string(),
+            _ => "embedded default gate".into(),
+        }
+    }
 }
 
 /// Whether the lower end of a [`number_in`] range is allowed.
@@ -73,13 +96,30 @@ pub fn gate_config(args: &GateArgs) -> Result<GateConfig> {
     Ok(cfg)
 }
 
+/// The gate of the arguments: a deck with its import spec, or a configuration.
+pub fn gate_source(args: &GateArgs) -> Result<GateSource> {
+    match (&args.gate_inp, &args.import_spec) {
+        (Some(inp), Some(spec)) => Ok(GateSource::Deck {
+            inp: inp.clone(),
+            spec: spec.clone(),
+        }),
+        _ => Ok(GateSource::Config(gate_config(args)?)),
+    }
+}
+
 /// Builds and condenses the gate (Module 1) with its contact model; reports the time.
-pub fn build_contact(cfg: &GateConfig) -> Result<ContactModel> {
-    let (contact, s, seconds) =
-        bamudi_gate::gate::build(cfg).context("building the gate model (Module 1)")?;
+pub fn build_gate(source: &GateSource) -> Result<BuiltGate> {
+    let built = source
+        .build()
+        .context("building the gate model (Module 1)")?;
+    let mesh = built
+        .element_size
+        .map_or("the deck's own mesh".into(), |h| {
+            format!("element size {h} in")
+        });
     eprintln!(
-        "gate: {} dofs, element size {} in, built and condensed in {seconds:.1} s",
-        s.n_dofs, s.element_size
+        "gate: {} dofs, {mesh}, built and condensed in {:.1} s",
+        built.n_dofs, built.seconds
     );
-    Ok(contact)
+    Ok(built)
 }

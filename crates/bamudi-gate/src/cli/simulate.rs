@@ -1,12 +1,11 @@
 //! `bamudi simulate experiments|field`.
-use super::{Bound, GateArgs, build_contact, gate_config, number_in};
+use super::{Bound, GateArgs, build_gate, gate_source, number_in};
 use anyhow::{Context, Result};
-use bamudi::Experiments;
 use bamudi_gate::output::check_file_destination;
+use bamudi_gate::session::GateSource;
 use mitergate::data::field::{FieldConfig, FieldEffects, MissingValues};
-use mitergate::data::truth::{self, Scenario};
+use mitergate::data::truth::Scenario;
 use mitergate::reality::Reality;
-use nalgebra::DMatrix;
 use std::path::PathBuf;
 
 /// What to simulate.
@@ -84,14 +83,22 @@ pub struct FieldArgs {
 }
 
 /// The truth's contact model: the gate of `gate`, or its reality (as built, mesh, support)
-/// when `--reality` is given; and the reality (the identity without one).
+/// when `--reality` is given; and the reality (the identity without one). A reality departs
+/// from a gate configuration: it is refused with an imported deck.
 fn truth_contact(
     gate: &GateArgs,
     reality: Option<&std::path::Path>,
 ) -> Result<(mitergate::ContactModel, Reality)> {
-    let drawing = gate_config(gate)?;
+    let source = gate_source(gate)?;
     let Some(path) = reality else {
-        return Ok((build_contact(&drawing)?, Reality::default()));
+        return Ok((build_gate(&source)?.contact, Reality::default()));
+    };
+    let GateSource::Config(drawing) = source else {
+        anyhow::bail!(
+            "--reality {}: a reality declares deviations from a gate configuration (--gate or \
+             the embedded default); it cannot be combined with --gate-inp",
+            path.display()
+        )
     };
     let r = Reality::from_file(path).with_context(|| format!("--reality {}", path.display()))?;
     let contact = bamudi_gate::gate::build_truth(&r, &drawing)
@@ -123,19 +130,8 @@ fn experiments(a: &ExperimentsArgs, gate: &GateArgs, seed: Option<u64>) -> Resul
     sc.validate().context("invalid --n or --noise-sd")?;
     check_file_destination("--out", &a.out)?;
     let (contact, reality) = truth_contact(gate, a.reality.as_deref())?;
-    let e = truth::generate(&sc, &contact).context("generating the experiments")?;
-    let names = contact.gate().gauge_names.clone();
-    let n = e.x.len();
-    let mut y = DMatrix::from_fn(n, names.len(), |i, j| e.strains[i][j]);
-    for i in 0..n {
-        let mut row: Vec<Option<f64>> = y.row(i).iter().map(|v| Some(*v)).collect();
-        reality.apply_sensors(&names, i as f64 / (n - 1).max(1) as f64, &mut row);
-        for (j, v) in row.into_iter().enumerate() {
-            y[(i, j)] = v.unwrap_or(f64::NAN);
-        }
-    }
-    let x = DMatrix::from_fn(n, 2, |i, j| e.x[i][j]);
-    let exps = Experiments::new(vec!["h_up".into(), "h_down".into()], names, x, y)?;
+    let exps = bamudi_gate::session::simulate_experiments(&sc, &contact, &reality)
+        .context("generating the experiments")?;
     exps.write_csv(&a.out)?;
     eprintln!(
         "wrote {} experiments of {} (true gap {} in, prior U({}, {}) in, seed {}) to {}",

@@ -20,7 +20,7 @@
 //!   "gp": [ { "coefficient": k, "noise_variance": f, "log_marginal_likelihood": f } ],
 //!   "covariance": { "size": N_s, "log_det": f, "jitter": f },
 //!   "timings_s": { "training_set_s": f, "estimator_s": f, "rho_s": f, "gp_s": f, "module3_s": f },
-//!   "inputs": { "config": s, "data": s, "gate": s, "element_size_in": f, "gap_prior_in": [lo, hi],
+//!   "inputs": { "config": s, "data": s, "gate": s, "element_size_in": f or null (a deck), "gap_prior_in": [lo, hi],
 //!               "seed": int, "version": s, "warnings": [s] }   // added, schema still 1
 //! }
 //! ```
@@ -82,8 +82,8 @@ pub struct ReportInputs {
     pub data: String,
     /// Gate configuration file, or `embedded default gate`.
     pub gate: String,
-    /// Mesh element size (in).
-    pub element_size_in: f64,
+    /// Mesh element size (in); `None` for an imported deck (its own mesh).
+    pub element_size_in: Option<f64>,
     /// Uniform prior of the gap (in).
     pub gap_prior_in: (f64, f64),
     /// Master seed.
@@ -394,12 +394,15 @@ fn plot_gp_coefficients(cal: &Calibration, path: &Path) -> Result<()> {
 pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
     let mut s = format!(
         "## Inputs\n\n* configuration: `{}`\n* data: `{}` (water levels in in, strains in microstrain)\n\
-         * gate: {}, mesh element size {} in\n* gap prior: U({}, {}) in\n* seed: {}\n\
+         * gate: {}, {}\n* gap prior: U({}, {}) in\n* seed: {}\n\
          * bamudi {}\n\n",
         i.config,
         i.data,
         i.gate,
-        i.element_size_in,
+        i.element_size_in
+            .map_or("the deck's own mesh".into(), |h| format!(
+                "mesh element size {h} in"
+            )),
         i.gap_prior_in.0,
         i.gap_prior_in.1,
         i.seed,

@@ -1,6 +1,7 @@
 //! The `bamudi` binary: clear errors for bad input, and a small simulate -> calibrate ->
 //! predict round trip on a coarse gate (60 in elements, so it runs in seconds).
 mod corpus;
+mod deck;
 mod docs;
 
 use std::path::{Path, PathBuf};

@@ -1,0 +1,386 @@
+//! The operations the `bamudi` command line and the Python package (`python/`) share, so that
+//! both give the same numbers for the same inputs and seed and the same messages for the same
+//! mistakes: the calibration specification (`gap_prior`, `discrepancy_terms`,
+//! `[calibration]`), the experiments read from a table and checked, the calibration with the
+//! gate's physics checks, and the paper's synthetic experiments on a gate or a reality.
+
+use crate::calibrator::GateCalibrator;
+use crate::error::{GateAppError, Result};
+use crate::gate::SavedModel;
+use bamudi::data::Table;
+use bamudi::observe::Observer;
+use bamudi::{Calibrate, Calibration, CalibrationConfig, CalibrationParams, Experiments};
+use mitergate::contact::ContactParams;
+use mitergate::data::truth::{self, Scenario};
+use mitergate::inp::{ImportSpec, InpModel};
+use mitergate::reality::Reality;
+use mitergate::{ContactModel, GateConfig, GateMultiLevel};
+use mlmodel::{ObservableModel, UnobservableModel};
+use nalgebra::DMatrix;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// Where a gate comes from: a configuration (the embedded default or a gate TOML) or a
+/// finite-element deck (`.inp`, Abaqus / CalculiX) with its import spec (TOML; see
+/// `docs/mitergate.md`, "Bring your own gate").
+#[derive(Debug, Clone)]
+pub enum GateSource {
+    /// A gate configuration, built by the crate's own mesher.
+    Config(GateConfig),
+    /// An imported deck and the spec that tells where its quoin, skin and gauges are.
+    Deck {
+        /// The `.inp` file.
+        inp: PathBuf,
+        /// The import spec (TOML).
+        spec: PathBuf,
+    },
+}
+
+/// A built and condensed gate (Module 1) with what the reports state about it.
+#[derive(Debug, Clone)]
+pub struct BuiltGate {
+    /// The contact model on the condensed gate.
+    pub contact: ContactModel,
+    /// The configuration, when the gate was built from one (not for a deck).
+    pub config: Option<GateConfig>,
+    /// Degrees of freedom of the finite-element model.
+    pub n_dofs: usize,
+    /// Mesh element size (in) of a configured gate (a deck has its own mesh).
+    pub element_size: Option<f64>,
+    /// Wall seconds of the build and condensation.
+    pub seconds: f64,
+}
+
+impl GateSource {
+    /// Builds and condenses the gate with the default contact parameters; a deck's errors
+    /// name the file (and the line or key).
+    pub fn build(&self) -> Result<BuiltGate> {
+        match self {
+            Self::Config(cfg) => {
+                let (contact, summary, seconds) = crate::gate::build(cfg)?;
+                Ok(BuiltGate {
+                    contact,
+                    config: Some(cfg.clone()),
+                    n_dofs: summary.n_dofs,
+                    element_size: Some(cfg.mesh.element_size),
+                    seconds,
+                })
+            }
+            Self::Deck { inp, spec } => build_deck(inp, spec),
+        }
+    }
+}
+
+/// Builds the gate of a deck and its import spec.
+fn build_deck(inp: &Path, spec: &Path) -> Result<BuiltGate> {
+    let start = std::time::Instant::now();
+    let named = |path: &Path, e: mitergate::GateError| {
+        GateAppError::Invalid(format!("{}: {e}", path.display()))
+    };
+    let import = ImportSpec::from_file(spec).map_err(|e| named(spec, e))?;
+    let deck = InpModel::from_file(inp).map_err(|e| named(inp, e))?;
+    let n_dofs = 6 * deck.nodes.len();
+    let condensed = deck
+        .build(import.drilling_penalty)
+        .and_then(|m| m.condense(&import, mitergate::DEFAULT_NU))
+        .map_err(|e| named(inp, e))?;
+    let contact = ContactParams::default().build(condensed)?;
+    Ok(BuiltGate {
+        contact,
+        config: None,
+        n_dofs,
+        element_size: None,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Most Legendre terms per discrepancy component: the gate has about 30 representation
+/// points along the quoin, and the prior-scale fit of higher orders is not identifiable from
+/// 7 gauges anyway.
+pub const MAX_DISCREPANCY_TERMS: usize = 20;
+
+/// Fewest experiments with distinct water levels: the coefficient GPs of Eq. 33-37 fit a
+/// length scale per input, an amplitude and a noise level per coefficient; fewer distinct
+/// conditions cannot identify them.
+pub const MIN_DISTINCT_EXPERIMENTS: usize = 10;
+
+/// What a calibration of the gate needs besides the data: the `calibrate` configuration file
+/// (TOML) or the Python package's dict (JSON), with the same keys.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrateSpec {
+    /// Uniform prior of the gap θ (in): exactly two numbers `[lo, hi]`.
+    pub gap_prior: Vec<f64>,
+    /// Legendre terms of the discrepancy (normal, tangential); the paper's 6 + 6 by default.
+    #[serde(default = "default_terms")]
+    pub discrepancy_terms: [usize; 2],
+    /// BA-MUDI settings (missing keys take their defaults).
+    #[serde(default)]
+    pub calibration: CalibrationParams,
+}
+
+fn default_terms() -> [usize; 2] {
+    [6, 6]
+}
+
+impl CalibrateSpec {
+    /// Parses TOML text and checks it; `label` (the file) starts every message.
+    pub fn from_toml_str(text: &str, label: &str) -> Result<Self> {
+        let spec: Self = toml::from_str(text).map_err(|e| GateAppError::Serde {
+            context: format!("parsing {label}"),
+            reason: e.to_string(),
+        })?;
+        spec.checked(label)
+    }
+
+    /// Parses JSON text (the Python package's dict) and checks it; `label` starts every message.
+    pub fn from_json_str(text: &str, label: &str) -> Result<Self> {
+        let spec: Self = serde_json::from_str(text).map_err(|e| GateAppError::Serde {
+            context: format!("parsing {label}"),
+            reason: e.to_string(),
+        })?;
+        spec.checked(label)
+    }
+
+    /// The gap prior `(lo, hi)` (in), checked by the constructors.
+    pub fn prior(&self) -> (f64, f64) {
+        (self.gap_prior[0], self.gap_prior[1])
+    }
+
+    /// The checked calibration configuration, with the seed replaced when `seed` is given.
+    pub fn config(&self, seed: Option<u64>) -> Result<CalibrationConfig> {
+        let mut params = self.calibration.clone();
+        if let Some(s) = seed {
+            params.seed = s;
+        }
+        Ok(params.check()?)
+    }
+
+    fn checked(self, label: &str) -> Result<Self> {
+        let ok = match self.gap_prior[..] {
+            [lo, hi] => lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo < hi,
+            _ => false,
+        };
+        if !ok {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: `gap_prior` must be two numbers [lo, hi] with 0 <= lo < hi (in), got {:?}",
+                self.gap_prior
+            )));
+        }
+        if !self
+            .discrepancy_terms
+            .iter()
+            .all(|t| (1..=MAX_DISCREPANCY_TERMS).contains(t))
+        {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: `discrepancy_terms` must be in [1, {MAX_DISCREPANCY_TERMS}] each, got {:?}",
+                self.discrepancy_terms
+            )));
+        }
+        if let Err(e) = self.calibration.clone().check() {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: in table [calibration]: {e}"
+            )));
+        }
+        Ok(self)
+    }
+
+    /// Checks the spec against the gate's quoin height `top` (in): the prior's upper bound
+    /// must lie below it (for a configured gate, checked before the gate is built).
+    pub fn check_quoin_height(&self, label: &str, top: f64) -> Result<()> {
+        if self.prior().1 >= top {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: `gap_prior` upper bound {} in must lie below the quoin height {top} in",
+                self.prior().1
+            )));
+        }
+        Ok(())
+    }
+
+    /// The saved model of a calibration of `contact` (built from `gate`, `None` for a deck)
+    /// with this spec, checked by [`check_quoin_height`](Self::check_quoin_height).
+    pub fn saved_model(
+        &self,
+        label: &str,
+        gate: Option<GateConfig>,
+        contact: ContactModel,
+    ) -> Result<SavedModel> {
+        self.check_quoin_height(label, contact.gate().quoin_height)?;
+        Ok(SavedModel {
+            gate,
+            contact,
+            gap_prior: self.prior(),
+            discrepancy_terms: self.discrepancy_terms,
+        })
+    }
+}
+
+/// The experiments of the table in the gate's columns, each row checked against the model's
+/// domain and the set checked for degeneracy; every error names the file (and the line).
+/// Rows with the gate open (no head difference) carry no quoin force: they are left out with
+/// a warning naming them, as the close loop's calibrator does.
+pub fn experiments_from_table(table: &Table, model: &GateMultiLevel) -> Result<Experiments> {
+    let names = model.observable.output_names();
+    let outputs: Vec<&str> = names.iter().map(String::as_str).collect();
+    let all = Experiments::from_table(table, &["h_up", "h_down"], &outputs)?;
+    let col = table.column("h_up")?;
+    let mut kept = vec![];
+    let mut open = vec![];
+    for i in 0..all.len() {
+        let x = [all.x[(i, 0)], all.x[(i, 1)]];
+        if let Err(e) = model.unobservable.check_input(&x) {
+            return Err(table.error_at(i, col, e.to_string()).into());
+        }
+        match model.unobservable.response_vanishes(&x) {
+            true => open.push(table.line(i)),
+            false => kept.push(i),
+        }
+    }
+    if !open.is_empty() {
+        log::warn!(
+            "{}: {} row(s) with the gate open (no head difference, no quoin force) left out, \
+             lines {:?}{}",
+            table.file(),
+            open.len(),
+            &open[..open.len().min(10)],
+            if open.len() > 10 { " ..." } else { "" }
+        );
+    }
+    let exps = Experiments::new(
+        all.input_names.clone(),
+        all.output_names.clone(),
+        all.x.select_rows(kept.iter()),
+        all.y.select_rows(kept.iter()),
+    )?;
+    check_informative(table, &exps, &outputs)?;
+    Ok(exps)
+}
+
+/// Refuses data that would give a confident number from nothing: too few distinct
+/// conditions, or a gauge that never changes (stuck or disconnected).
+fn check_informative(table: &Table, exps: &Experiments, outputs: &[&str]) -> Result<()> {
+    let mut conditions: Vec<(u64, u64)> = (0..exps.len())
+        .map(|i| (exps.x[(i, 0)].to_bits(), exps.x[(i, 1)].to_bits()))
+        .collect();
+    conditions.sort_unstable();
+    conditions.dedup();
+    if conditions.len() < MIN_DISTINCT_EXPERIMENTS {
+        return Err(GateAppError::Invalid(format!(
+            "{}: {} experiment(s) with {} distinct water-level pair(s); calibrate needs at least \
+             {MIN_DISTINCT_EXPERIMENTS} distinct conditions",
+            table.file(),
+            exps.len(),
+            conditions.len()
+        )));
+    }
+    for (j, name) in outputs.iter().enumerate() {
+        let col = exps.y.column(j);
+        let (lo, hi) = (col.min(), col.max());
+        if hi <= lo {
+            return Err(GateAppError::Invalid(format!(
+                "{}: column `{name}` is constant ({lo} microstrain in every row): a stuck or \
+                 disconnected gauge carries no information; fix or drop it (and its gauge in \
+                 the gate file)",
+                table.file()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// BA-MUDI Modules 2-3 on the gate with the adequacy verdict and the gate's physics checks
+/// (what `bamudi calibrate` computes before it writes its results).
+pub fn calibrate(
+    model: &GateMultiLevel,
+    exps: &Experiments,
+    config: &CalibrationConfig,
+    observer: &dyn Observer,
+) -> Result<Calibration> {
+    let mut cal = Calibrate::new(config).observer(observer).run(model, exps)?;
+    crate::physics::add_physics_checks(&mut cal, model, exps, config)?;
+    Ok(cal)
+}
+
+/// The paper's synthetic experiments of `scenario` (Sec. 4.3) with `truth` as the true
+/// contact model and the reality's sensor behaviour applied; columns `h_up`, `h_down` (in)
+/// and one per gauge (microstrain; a missing reading is `NaN`).
+pub fn simulate_experiments(
+    scenario: &Scenario,
+    truth_contact: &ContactModel,
+    reality: &Reality,
+) -> Result<Experiments> {
+    let e = truth::generate(scenario, truth_contact)?;
+    let names = truth_contact.gate().gauge_names.clone();
+    let n = e.x.len();
+    let mut y = DMatrix::from_fn(n, names.len(), |i, j| e.strains[i][j]);
+    for i in 0..n {
+        let mut row: Vec<Option<f64>> = y.row(i).iter().map(|v| Some(*v)).collect();
+        reality.apply_sensors(&names, i as f64 / (n - 1).max(1) as f64, &mut row);
+        for (j, v) in row.into_iter().enumerate() {
+            y[(i, j)] = v.unwrap_or(f64::NAN);
+        }
+    }
+    let x = DMatrix::from_fn(n, 2, |i, j| e.x[i][j]);
+    Ok(Experiments::new(
+        vec!["h_up".into(), "h_down".into()],
+        names,
+        x,
+        y,
+    )?)
+}
+
+/// The close loop's gate calibrator with the command line's settings: at most
+/// `max_experiments` rows per calibration, the gauge noise (microstrain) when known, the
+/// calibration configuration when given (else the calibrator's default), the seed when given.
+pub fn gate_calibrator(
+    contact: ContactModel,
+    prior: (f64, f64),
+    max_experiments: usize,
+    gauge_noise_sd: Option<f64>,
+    config: Option<CalibrationConfig>,
+    seed: Option<u64>,
+) -> Result<GateCalibrator> {
+    let mut calibrator = GateCalibrator::new(contact, prior)?.max_experiments(max_experiments);
+    if let Some(cfg) = config {
+        calibrator = calibrator.config(cfg);
+    }
+    if let Some(sd) = gauge_noise_sd {
+        calibrator = calibrator.gauge_noise_sd(sd)?;
+    }
+    if let Some(s) = seed {
+        let params = calibrator
+            .calibration_config()
+            .clone()
+            .into_params()
+            .seed(s);
+        calibrator = calibrator.config(params.check()?);
+    }
+    Ok(calibrator)
+}
+
+/// A close-loop configuration from TOML text (missing keys take their defaults), checked.
+pub fn close_loop_config_from_toml(text: &str) -> Result<bamudi::closeloop::CloseLoopConfig> {
+    let cfg: bamudi::closeloop::CloseLoopConfig =
+        toml::from_str(text).map_err(|e| GateAppError::Serde {
+            context: "close-loop configuration (TOML)".into(),
+            reason: e.to_string(),
+        })?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// The finite-element deck (`.inp`, Abaqus / CalculiX) of a configured gate and its import
+/// spec (TOML): what `--gate-inp` / `--import-spec` and the Python `Gate.from_inp` read back
+/// (a starting point for a deck of your own gate; re-imported, it condenses to the same
+/// model to round-off, docs/verification.md). The deck's load step is the full head.
+pub fn export_deck(cfg: &GateConfig) -> Result<(String, String)> {
+    let gate = mitergate::GateModel::build(cfg)?;
+    let deck = mitergate::inp::export_gate(&gate, &mitergate::inp::ExportOptions::default())?;
+    let spec = toml::to_string(&ImportSpec::for_exported_gate(&gate)).map_err(|e| {
+        GateAppError::Serde {
+            context: "the import spec (TOML)".into(),
+            reason: e.to_string(),
+        }
+    })?;
+    Ok((deck, spec))
+}

@@ -1,0 +1,63 @@
+//! `bamudi._native`: the Python extension of bamudi (pyo3). It binds the same library
+//! functions the `bamudi` command line calls ([`bamudi_gate::session`]), so the numbers for
+//! the same inputs and seed are the command line's, and every error is a
+//! `bamudi.BamudiError` carrying the command line's message (causes joined by `: `).
+//!
+//! Long computations (building the gate, simulating, calibrating, predicting, the close
+//! loop) release the GIL; the engine's `log` records go to Python's `logging` (logger names
+//! start with the Rust module path, e.g. `bamudi.calibration`), progress to an optional
+//! callback `progress(stage: str, done: int, total: int)`.
+//!
+//! The Python-facing layer (`py/bamudi/__init__.py`) adds pandas conversion and file
+//! handling; the type stubs are `py/bamudi/_native.pyi`.
+
+mod calibration;
+mod closeloop;
+mod gate;
+mod progress;
+mod simulate;
+
+use pyo3::prelude::*;
+
+pyo3::create_exception!(
+    _native,
+    BamudiError,
+    pyo3::exceptions::PyException,
+    "An input bamudi refuses or a computation that failed; the message names the culprit."
+);
+
+/// Turns any error into a `BamudiError` with its chain of causes (`outer: inner: ...`), the
+/// text the command line prints after `error: `.
+pub(crate) fn to_py(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> PyErr {
+    let e: Box<dyn std::error::Error + Send + Sync> = e.into();
+    let mut text = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        let s = c.to_string();
+        if !text.ends_with(&s) {
+            text.push_str(": ");
+            text.push_str(&s);
+        }
+        cause = c.source();
+    }
+    BamudiError::new_err(text)
+}
+
+/// A `BamudiError` with `message`.
+pub(crate) fn invalid(message: impl Into<String>) -> PyErr {
+    BamudiError::new_err(message.into())
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    pyo3_log::init();
+    m.add("BamudiError", m.py().get_type::<BamudiError>())?;
+    m.add_class::<gate::Gate>()?;
+    m.add_class::<calibration::Calibration>()?;
+    m.add_function(wrap_pyfunction!(simulate::simulate_experiments, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate::simulate_field, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(closeloop::close_loop, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,122 @@
+"""Shapes and dtypes, progress and logging, and the GIL: long computations run without it,
+so two threads calibrate at once and Python keeps running meanwhile."""
+
+import logging
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import bamudi
+from conftest import CONFIG
+
+
+def test_gate_and_experiment_shapes(gate, experiments):
+    assert gate.element_size == 60.0 and gate.n_dofs > 0 and gate.quoin_height > 0
+    assert experiments.columns == ("h_up", "h_down", *gate.gauge_names)
+    assert experiments.data.shape == (60, 2 + len(gate.gauge_names))
+    assert experiments.data.dtype == np.float64 and np.isfinite(experiments.data).all()
+
+
+def test_field_record_arrays(gate):
+    rec = bamudi.simulate_field(gate, days=2.0, step_minutes=60.0, missing=0.1, seed=2)
+    n = 48
+    assert rec.data.shape == (n, len(rec.columns)) and rec.data.dtype == np.float64
+    assert rec.time_unix_s.dtype == np.int64 and rec.time_unix_s.shape == (n,)
+    assert np.all(np.diff(rec.time_unix_s) == 3600)
+    assert rec.gap_in.shape == (n,) and np.all(rec.gap_in == 90.0)
+    gauges = rec.data[:, rec.columns.index("SG1"):]
+    assert np.isnan(gauges).any(), "10 % missing values must show as NaN"
+    assert rec.csv.count("\n") == n + 1
+
+
+def test_calibration_outputs(calibration, gate):
+    lo, hi = calibration.theta_ci95
+    assert 81.0 <= lo < calibration.theta_mean < hi <= 105.0
+    assert calibration.theta_sd > 0 and 0 < calibration.rho_star <= 1.5
+    assert calibration.verdict in ("adequate", "inadequate")
+    assert set(calibration.adequacy) >= {"verdict", "failed"}
+    z = calibration.z_in
+    p = calibration.predict(np.array([700.0, 650.0, 600.0]), np.array([100.0, 80.0, 50.0]))
+    assert p["strain_mean"].shape == (3, len(gate.gauge_names))
+    for part in ("normal", "tangential"):
+        assert p[f"{part}_mean"].shape == (3, z.size)
+        assert np.all(p[f"{part}_lower"] <= p[f"{part}_upper"])
+    assert np.all(p["strain_sd"] >= 0)
+    one = calibration.predict(700.0, 100.0)
+    assert one["normal_mean"].shape == (z.size,)
+    assert np.array_equal(one["normal_mean"], p["normal_mean"][0])
+
+
+def test_inputs_as_dataframe_dict_and_array_agree(gate, experiments, calibration):
+    as_dict = {c: experiments.data[:, i] for i, c in enumerate(experiments.columns)}
+    cal = bamudi.calibrate(gate, as_dict, CONFIG)
+    assert cal.theta_mean == calibration.theta_mean
+    cal = bamudi.calibrate(gate, experiments.data, CONFIG, columns=experiments.columns)
+    assert cal.theta_mean == calibration.theta_mean
+    pd = pytest.importorskip("pandas")
+    frame = experiments.to_frame()
+    assert isinstance(frame, pd.DataFrame)
+    assert bamudi.calibrate(gate, frame, CONFIG).theta_mean == calibration.theta_mean
+
+
+def test_progress_reports_every_stage(gate, experiments):
+    calls = []
+    bamudi.calibrate(gate, experiments, CONFIG, progress=lambda s, d, t: calls.append((s, d, t)))
+    stages = {s for s, _, _ in calls}
+    assert "Module 3: theta posterior" in stages and "Module 2: rho*" in stages
+    assert all(d <= t for _, d, t in calls if t > 0)
+    last = {}
+    for s, d, t in calls:
+        last[s] = (d, t)
+    assert all(d == t for d, t in last.values())
+
+
+def test_engine_warnings_reach_python_logging(gate, experiments, caplog):
+    data = experiments.data.copy()
+    data[:3, 1] = data[:3, 0]  # three rows with the gate open: left out with a warning
+    with caplog.at_level(logging.WARNING):
+        bamudi.calibrate(gate, data, CONFIG, columns=experiments.columns)
+    assert any("gate open" in r.getMessage() for r in caplog.records), caplog.records
+
+
+def test_two_threads_calibrate_at_once_without_the_gil(gate, experiments, calibration):
+    results, spans = {}, {}
+
+    def work(name, seed_shift):
+        t0 = time.perf_counter()
+        results[name] = bamudi.calibrate(gate, experiments, CONFIG)
+        spans[name] = (t0, time.perf_counter())
+
+    threads = [threading.Thread(target=work, args=(k, 0)) for k in ("a", "b")]
+    for t in threads:
+        t.start()
+    ticks = 0
+    while any(t.is_alive() for t in threads):
+        ticks += 1  # runs only while the calibrations do not hold the GIL
+        time.sleep(0.001)
+    for t in threads:
+        t.join()
+    (a0, a1), (b0, b1) = spans["a"], spans["b"]
+    assert max(a0, b0) < min(a1, b1), "the two calibrations did not overlap"
+    # a calibration takes seconds: a main thread blocked by the GIL would tick a few times
+    assert ticks > 100, ticks
+    # and running concurrently changes no number
+    assert results["a"].theta_mean == results["b"].theta_mean == calibration.theta_mean
+
+
+def test_the_quick_start_example_runs(capsys):
+    import pathlib
+    import runpy
+    import sys
+
+    example = pathlib.Path(__file__).resolve().parents[1] / "examples" / "quickstart.py"
+    argv = sys.argv
+    sys.argv = [str(example), "60"]  # the coarse gate: the example's flow, a CI-sized mesh
+    try:
+        runpy.run_path(str(example), run_name="__main__")
+    finally:
+        sys.argv = argv
+    out = capsys.readouterr().out
+    assert "saved and reloaded" in out and "gap: " in out
