@@ -97,6 +97,9 @@ pub fn calibrate(
             Ok::<_, bamudi_gate::GateAppError>((cal, model))
         })
         .map_err(to_py)?;
+    for w in session::posterior_warnings(&cal, saved.gap_prior) {
+        log::warn!("{w}");
+    }
     Ok(Calibration { cal, saved, model })
 }
 
@@ -159,6 +162,17 @@ impl Calibration {
             .transpose()
     }
 
+    /// The posterior's warnings (mass piled at a prior bound, an interval narrower than three
+    /// evaluated grid spacings), as the command line prints them and writes them into
+    /// `results.json` (`inputs.warnings`); also logged when the calibration ends.
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        session::posterior_warnings(&self.cal, self.saved.gap_prior)
+            .iter()
+            .map(ToString::to_string)
+            .collect()
+    }
+
     /// The adequacy verdict's one-line summary (`None` without checks).
     #[getter]
     fn adequacy_summary(&self) -> Option<String> {
@@ -183,7 +197,13 @@ impl Calibration {
             )));
         }
         let bands = py.detach(|| self.bands(&hu, &hd))?;
-        bands_dict(py, bands, self.model.unobservable.coordinates().len())
+        let gauges = self.model.observable.output_names().len();
+        bands_dict(
+            py,
+            bands,
+            gauges,
+            self.model.unobservable.coordinates().len(),
+        )
     }
 
     /// Writes `calibration.json` and `model.json` (the files of `bamudi calibrate`, readable
@@ -272,7 +292,12 @@ impl Calibration {
 
 /// The bands as `(conditions, outputs)` arrays: `strain_*` per gauge, `normal_*` and
 /// `tangential_*` per quoin point (the force band is blocked `[normal; tangential]`).
-fn bands_dict<'py>(py: Python<'py>, bands: Bands, points: usize) -> PyResult<Bound<'py, PyDict>> {
+fn bands_dict<'py>(
+    py: Python<'py>,
+    bands: Bands,
+    gauges: usize,
+    points: usize,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let rows = bands.len();
     type Pick = fn(&bamudi::Band) -> &Vec<f64>;
@@ -283,7 +308,6 @@ fn bands_dict<'py>(py: Python<'py>, bands: Bands, points: usize) -> PyResult<Bou
         ("upper", |b| &b.upper),
     ];
     for (stat, pick) in stats {
-        let gauges = bands.first().map_or(0, |b| pick(&b.0).len());
         let strain = ndarray::Array2::from_shape_fn((rows, gauges), |(i, j)| pick(&bands[i].0)[j]);
         let normal = ndarray::Array2::from_shape_fn((rows, points), |(i, j)| pick(&bands[i].1)[j]);
         let tangential =

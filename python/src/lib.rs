@@ -56,6 +56,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<calibration::Calibration>()?;
     m.add_function(wrap_pyfunction!(simulate::simulate_experiments, m)?)?;
     m.add_function(wrap_pyfunction!(simulate::simulate_field, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate::experiments_csv, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(closeloop::close_loop, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

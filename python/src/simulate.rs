@@ -7,16 +7,40 @@ use mitergate::ContactModel;
 use mitergate::data::field::{FieldConfig, FieldEffects, MissingValues};
 use mitergate::data::truth::Scenario;
 use mitergate::reality::Reality;
-use numpy::{IntoPyArray, PyArray1, PyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
+
+/// The CSV text `bamudi simulate experiments` writes for these experiments (the first two
+/// columns are the inputs): the same function, so the same digits.
+#[pyfunction]
+pub fn experiments_csv(columns: Vec<String>, data: PyReadonlyArray2<'_, f64>) -> PyResult<String> {
+    let a = data.as_array();
+    if columns.len() != a.ncols() || columns.len() < 3 {
+        return Err(invalid(format!(
+            "experiments need h_up, h_down and at least one gauge column matching the array: \
+             {} names for {} columns",
+            columns.len(),
+            a.ncols()
+        )));
+    }
+    let x = nalgebra::DMatrix::from_fn(a.nrows(), 2, |i, j| a[(i, j)]);
+    let y = nalgebra::DMatrix::from_fn(a.nrows(), a.ncols() - 2, |i, j| a[(i, j + 2)]);
+    let exps = bamudi::Experiments::new(columns[..2].to_vec(), columns[2..].to_vec(), x, y)
+        .map_err(to_py)?;
+    Ok(exps.to_csv_string())
+}
 
 /// Most rows of a simulated field record (as `bamudi simulate field`).
 const MAX_FIELD_ROWS: f64 = 200_000.0;
 
 /// The truth's contact model: the gate's own, or the reality's (as built, mesh, support).
-fn truth(gate: &Gate, reality: Option<&PathBuf>) -> PyResult<(ContactModel, Reality)> {
+fn truth(
+    py: Python<'_>,
+    gate: &Gate,
+    reality: Option<&PathBuf>,
+) -> PyResult<(ContactModel, Reality)> {
     let Some(path) = reality else {
         return Ok((gate.contact.clone(), Reality::default()));
     };
@@ -28,14 +52,15 @@ fn truth(gate: &Gate, reality: Option<&PathBuf>) -> PyResult<(ContactModel, Real
         )
     })?;
     let r = Reality::from_file(path).map_err(|e| context(&e))?;
-    let contact = bamudi_gate::gate::build_truth(&r, drawing).map_err(|e| context(&e))?;
+    let built = py.detach(|| bamudi_gate::gate::build_truth(&r, drawing));
+    let contact = built.map_err(|e| context(&e))?;
     Ok((contact, r))
 }
 
 /// The paper's synthetic experiments (Sec. 4.3) of `scenario` (1: θ* = 90 in, 2: θ* = 150
 /// in): returns `(columns, data)` with columns `h_up`, `h_down` (in) and one per gauge
-/// (microstrain), `data` an `(n, 2 + gauges)` float64 array (`NaN` where a reality's sensor
-/// lost a reading). `seed` defaults to the scenario number, as on the command line.
+/// (microstrain), `data` an `(n, 2 + gauges)` float64 array. `seed` defaults to the scenario
+/// number, as on the command line.
 #[pyfunction]
 #[pyo3(signature = (gate, scenario, n=500, noise_sd=1.0, seed=None, reality=None))]
 pub fn simulate_experiments<'py>(
@@ -63,7 +88,7 @@ pub fn simulate_experiments<'py>(
         sc = sc.seed(s);
     }
     sc.validate().map_err(to_py)?;
-    let (contact, reality) = truth(gate, reality.as_ref())?;
+    let (contact, reality) = truth(py, gate, reality.as_ref())?;
     let exps = py
         .detach(|| bamudi_gate::session::simulate_experiments(&sc, &contact, &reality))
         .map_err(|e| invalid(format!("generating the experiments: {e}")))?;
@@ -130,7 +155,7 @@ pub fn simulate_field<'py>(
         .noise_sd(noise_sd)
         .gap(gap)
         .effects(fx);
-    let (contact, reality) = truth(gate, reality.as_ref())?;
+    let (contact, reality) = truth(py, gate, reality.as_ref())?;
     let rec = py
         .detach(|| {
             let mut rec = bamudi_gate::gate::simulate_field(&cfg, &contact)?;

@@ -1,6 +1,8 @@
 """Every refused input raises BamudiError (or TypeError for a wrong Python type) with a
 message naming the culprit: the command line's message where the command line has one."""
 
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -31,11 +33,11 @@ def test_gate_errors(tmp_path):
 
 
 def test_simulation_errors(gate, tmp_path):
-    expect("scenario", bamudi.simulate_experiments, gate, 3)
+    expect("scenarios 1 and 2", bamudi.simulate_experiments, gate, 3)
     expect("n must be in [1, 1000000]", bamudi.simulate_experiments, gate, 1, n=0)
     expect("noise_sd must be in [0, 1000]", bamudi.simulate_experiments, gate, 1, noise_sd=-1.0)
-    expect("reality", bamudi.simulate_experiments, gate, 1, n=5, reality=tmp_path / "missing.toml")
-    expect("effects", bamudi.simulate_field, gate, effects=["volcano"])
+    expect("missing.toml", bamudi.simulate_experiments, gate, 1, n=5, reality=tmp_path / "missing.toml")
+    expect("unknown effect `volcano`", bamudi.simulate_field, gate, effects=["volcano"])
     expect("days must be in (0, 3650]", bamudi.simulate_field, gate, days=0.0)
     expect("4320000 rows; at most 200000", bamudi.simulate_field, gate, days=3000.0, step_minutes=1.0)
     expect("missing must be in [0, 0.9]", bamudi.simulate_field, gate, missing=1.0)
@@ -50,6 +52,8 @@ def test_configuration_errors(gate, experiments):
     expect("in table [calibration]", bamudi.calibrate, gate, experiments,
            cfg(calibration={"theta_grid_points": 1}))
     expect("parsing config", bamudi.calibrate, gate, experiments, "gap_prior = [")
+    expect("config nope.toml: file does not exist", bamudi.calibrate, gate, experiments, "nope.toml")
+    expect("file does not exist", bamudi.calibrate, gate, experiments, pathlib.Path("nope.toml"))
     with pytest.raises(TypeError):
         bamudi.calibrate(gate, experiments, 42)
 
@@ -72,6 +76,9 @@ def test_data_errors(gate, experiments):
     out[0, 0] = -50.0
     expect("h_up", bamudi.calibrate, gate, out, CONFIG, columns=cols)
     expect("2-D array", bamudi.calibrate, gate, data[0], CONFIG, columns=cols)
+    named = {c: data[:, i] for i, c in enumerate(cols)}
+    named["SG5"] = ["x"] * len(data)
+    expect("data column `SG5` is not numeric", bamudi.calibrate, gate, named, CONFIG)
 
 
 def test_prediction_and_file_errors(calibration, tmp_path):

@@ -68,8 +68,10 @@ fn main() -> std::process::ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     progress::init_logging(cli.verbose);
-    if let Cmd::Predict(_) = &cli.cmd {
-        refuse_unused_flags(&cli)?;
+    match &cli.cmd {
+        Cmd::Predict(_) => refuse_unused_flags(&cli, "predict", true)?,
+        Cmd::ExportGate(_) => refuse_unused_flags(&cli, "export-gate", false)?,
+        _ => {}
     }
     if let Some(t) = cli.threads {
         rayon::ThreadPoolBuilder::new()
@@ -86,22 +88,33 @@ fn run(cli: Cli) -> Result<()> {
     }
 }
 
-/// `predict` uses the gate and settings saved by `calibrate`: a flag it would ignore is an
-/// error, not a silent no-op.
-fn refuse_unused_flags(cli: &Cli) -> Result<()> {
+/// `predict` uses the gate and settings saved by `calibrate`, `export-gate` draws no random
+/// number and solves nothing: a flag the command would ignore is an error, not a silent no-op.
+fn refuse_unused_flags(cli: &Cli, command: &str, gate_flags_unused: bool) -> Result<()> {
+    let g = &cli.gate;
     let unused = [
-        ("--gate", cli.gate.gate.is_some()),
-        ("--element-size", cli.gate.element_size.is_some()),
-        ("--gate-inp", cli.gate.gate_inp.is_some()),
-        ("--import-spec", cli.gate.import_spec.is_some()),
+        ("--gate", gate_flags_unused && g.gate.is_some()),
+        (
+            "--element-size",
+            gate_flags_unused && g.element_size.is_some(),
+        ),
+        ("--gate-inp", gate_flags_unused && g.gate_inp.is_some()),
+        (
+            "--import-spec",
+            gate_flags_unused && g.import_spec.is_some(),
+        ),
         ("--seed", cli.seed.is_some()),
         ("--threads", cli.threads.is_some()),
     ];
     for (flag, given) in unused {
+        let why = if gate_flags_unused {
+            "the gate and its settings come from the model.json written by `calibrate`"
+        } else {
+            "it only writes the gate as a deck"
+        };
         anyhow::ensure!(
             !given,
-            "{flag} is not used by `predict`: the gate and its settings come from the model.json \
-             written by `calibrate`; remove {flag}"
+            "{flag} is not used by `{command}`: {why}; remove {flag}"
         );
     }
     Ok(())

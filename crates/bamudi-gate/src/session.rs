@@ -8,6 +8,7 @@ use crate::calibrator::GateCalibrator;
 use crate::error::{GateAppError, Result};
 use crate::gate::SavedModel;
 use bamudi::data::Table;
+use bamudi::module3::posterior::{GridWarning, ThetaPosterior};
 use bamudi::observe::Observer;
 use bamudi::{Calibrate, Calibration, CalibrationConfig, CalibrationParams, Experiments};
 use mitergate::contact::ContactParams;
@@ -74,16 +75,17 @@ impl GateSource {
 /// Builds the gate of a deck and its import spec.
 fn build_deck(inp: &Path, spec: &Path) -> Result<BuiltGate> {
     let start = std::time::Instant::now();
-    let named = |path: &Path, e: mitergate::GateError| {
-        GateAppError::Invalid(format!("{}: {e}", path.display()))
-    };
-    let import = ImportSpec::from_file(spec).map_err(|e| named(spec, e))?;
-    let deck = InpModel::from_file(inp).map_err(|e| named(inp, e))?;
+    let named =
+        |what: String, e: mitergate::GateError| GateAppError::Invalid(format!("{what}: {e}"));
+    let import = ImportSpec::from_file(spec).map_err(|e| named(spec.display().to_string(), e))?;
+    let deck = InpModel::from_file(inp).map_err(|e| named(inp.display().to_string(), e))?;
     let n_dofs = 6 * deck.nodes.len();
+    // a failure here may lie in the deck or in what the spec says about it: name both
+    let both = format!("{} with import spec {}", inp.display(), spec.display());
     let condensed = deck
         .build(import.drilling_penalty)
         .and_then(|m| m.condense(&import, mitergate::DEFAULT_NU))
-        .map_err(|e| named(inp, e))?;
+        .map_err(|e| named(both, e))?;
     let contact = ContactParams::default().build(condensed)?;
     Ok(BuiltGate {
         contact,
@@ -288,6 +290,15 @@ fn check_informative(table: &Table, exps: &Experiments, outputs: &[&str]) -> Res
     Ok(())
 }
 
+/// The grid posterior's warnings (mass at a prior bound, an under-resolved interval), which
+/// the command line prints and writes into the report, and the Python package logs and keeps.
+pub fn posterior_warnings(cal: &Calibration, prior: (f64, f64)) -> Vec<GridWarning> {
+    match &cal.module3().posterior {
+        ThetaPosterior::Grid(g) => g.warnings(prior),
+        ThetaPosterior::Mcmc(_) => vec![],
+    }
+}
+
 /// BA-MUDI Modules 2-3 on the gate with the adequacy verdict and the gate's physics checks
 /// (what `bamudi calibrate` computes before it writes its results).
 pub fn calibrate(
@@ -303,7 +314,7 @@ pub fn calibrate(
 
 /// The paper's synthetic experiments of `scenario` (Sec. 4.3) with `truth` as the true
 /// contact model and the reality's sensor behaviour applied; columns `h_up`, `h_down` (in)
-/// and one per gauge (microstrain; a missing reading is `NaN`).
+/// and one per gauge (microstrain).
 pub fn simulate_experiments(
     scenario: &Scenario,
     truth_contact: &ContactModel,

@@ -68,10 +68,9 @@ class Experiments:
         return pd.DataFrame(self.data, columns=list(self.columns))
 
     def to_csv(self) -> str:
-        """The CSV text ``bamudi simulate experiments`` would write (exact values)."""
-        lines = [",".join(self.columns)]
-        lines += [",".join(repr(float(v)) for v in row) for row in self.data]
-        return "\n".join(lines) + "\n"
+        """The CSV text ``bamudi simulate experiments`` writes for these experiments (the same
+        Rust function: exact values, the same digits)."""
+        return _native.experiments_csv(list(self.columns), np.ascontiguousarray(self.data, dtype=np.float64))
 
 
 @dataclass(frozen=True)
@@ -166,6 +165,12 @@ class Calibration:
         return None if text is None else json.loads(text)
 
     @property
+    def warnings(self) -> list:
+        """The posterior's warnings (mass at a prior bound, an under-resolved interval), as the
+        command line prints them; also logged (``logging``) when the calibration ends."""
+        return list(self._native.warnings)
+
+    @property
     def verdict(self) -> Optional[str]:
         """``"adequate"`` or ``"inadequate"`` (``None`` without checks)."""
         a = self.adequacy
@@ -204,17 +209,42 @@ def _path(p) -> Optional[str]:
     return None if p is None else os.fspath(p)
 
 
+def _read_toml(value, what: str) -> Tuple[str, str]:
+    """``(text, label)`` of TOML given as a file path (``os.PathLike``, or a one-line string
+    ending in ``.toml``) or as text; a path that is not a file is an error naming it."""
+    if isinstance(value, os.PathLike) or (
+        isinstance(value, str) and "\n" not in value and value.strip().endswith(".toml")
+    ):
+        path = os.fspath(value)
+        if not os.path.isfile(path):
+            raise BamudiError(f"{what} {path}: file does not exist")
+        with open(path, encoding="utf-8") as f:
+            return f.read(), path
+    if isinstance(value, str):
+        return value, what
+    raise TypeError(f"{what} must be TOML text or a TOML file path, not {type(value).__name__}")
+
+
 def _config_args(config) -> dict:
     """The configuration as the native call takes it: a dict (JSON), TOML text, or a path to
     a TOML file (the file of ``bamudi calibrate --config``)."""
     if isinstance(config, Mapping):
         return {"config_json": json.dumps(config), "config_label": "config"}
-    if isinstance(config, (str, os.PathLike)) and os.path.isfile(config):
-        with open(config, encoding="utf-8") as f:
-            return {"config_toml": f.read(), "config_label": os.fspath(config)}
-    if isinstance(config, str):
-        return {"config_toml": config, "config_label": "config"}
-    raise TypeError(f"config must be a dict, TOML text or a TOML file path, not {type(config).__name__}")
+    if not isinstance(config, (str, os.PathLike)):
+        raise TypeError(f"config must be a dict, TOML text or a TOML file path, not {type(config).__name__}")
+    text, label = _read_toml(config, "config")
+    return {"config_toml": text, "config_label": label}
+
+
+def _numeric_columns(names, columns) -> np.ndarray:
+    """The columns as one float64 array; a column that is not numeric is an error naming it."""
+    out = []
+    for name, col in zip(names, columns):
+        try:
+            out.append(np.asarray(col, dtype=np.float64))
+        except (TypeError, ValueError) as e:
+            raise BamudiError(f"data column `{name}` is not numeric: {e}") from None
+    return np.ascontiguousarray(np.column_stack(out))
 
 
 def _table(data, columns) -> Tuple[list, np.ndarray]:
@@ -226,11 +256,11 @@ def _table(data, columns) -> Tuple[list, np.ndarray]:
         import pandas as pd
 
         if isinstance(data, pd.DataFrame):
-            return [str(c) for c in data.columns], np.ascontiguousarray(data.to_numpy(dtype=np.float64))
+            names = [str(c) for c in data.columns]
+            return names, _numeric_columns(names, [data[c] for c in data.columns])
     if isinstance(data, Mapping):
         names = list(data.keys())
-        arr = np.column_stack([np.asarray(data[k], dtype=np.float64) for k in names])
-        return names, np.ascontiguousarray(arr)
+        return names, _numeric_columns(names, [data[k] for k in names])
     arr = np.asarray(data, dtype=np.float64)
     if columns is None:
         raise TypeError("an array needs `columns` (h_up, h_down and the gauge names)")
@@ -278,8 +308,9 @@ def close_loop(
 ) -> dict:
     """Closes the loop on a field record (:class:`FieldRecord`, or the path of a field CSV):
     finds, adds and reports the effects the calibration misses, as ``bamudi close-loop``.
-    ``config`` and ``calibration_config`` are TOML texts or file paths. Returns the report
-    (the command line's ``results.json``) as a dict."""
+    ``config`` and ``calibration_config`` are TOML texts or file paths. Returns the loop's
+    report as a dict: the command line's ``results.json`` without its ``record_fatigue`` part
+    (the quoin block's fatigue over the record)."""
     if isinstance(record, FieldRecord):
         csv, label = record.csv, "record"
     else:
@@ -287,15 +318,12 @@ def close_loop(
             csv, label = f.read(), os.fspath(record)
     text = _native.close_loop(
         gate, csv, label=label, gap_prior=tuple(gap_prior), max_experiments=max_experiments,
-        gauge_noise_sd=gauge_noise_sd, config_toml=_text(config),
-        calibration_toml=_text(calibration_config), holdout_fraction=holdout_fraction,
+        gauge_noise_sd=gauge_noise_sd, config_toml=_text(config, "config"),
+        calibration_toml=_text(calibration_config, "calibration_config"), holdout_fraction=holdout_fraction,
         test_fraction=test_fraction, impute=impute, seed=seed, progress=progress,
     )
     return json.loads(text)
 
 
-def _text(t: Optional[Union[str, os.PathLike]]) -> Optional[str]:
-    if t is not None and os.path.isfile(t):
-        with open(t, encoding="utf-8") as f:
-            return f.read()
-    return None if t is None else os.fspath(t)
+def _text(t: Optional[Union[str, os.PathLike]], what: str) -> Optional[str]:
+    return None if t is None else _read_toml(t, what)[0]

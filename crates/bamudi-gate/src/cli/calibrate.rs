@@ -1,13 +1,12 @@
 //! `bamudi calibrate`: TOML configuration + CSV experiments -> results directory.
 use super::{GateArgs, build_gate, gate_source};
 use anyhow::{Context, Result};
-use bamudi::module3::posterior::{GridWarning, ThetaPosterior};
 use bamudi::{Calibration, CalibrationConfig};
 use bamudi_gate::output::StagedDir;
 use bamudi_gate::progress::Bars;
 use bamudi_gate::report::calibration::ReportInputs;
 use bamudi_gate::session::GateSource;
-use bamudi_gate::session::{self, CalibrateSpec, experiments_from_table};
+use bamudi_gate::session::{self, CalibrateSpec, experiments_from_table, posterior_warnings};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `calibrate`.
@@ -95,15 +94,6 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
     let dir = out.commit()?;
     print_summary(&cal, &dir);
     Ok(())
-}
-
-/// The grid posterior's warnings (at a prior bound, under-resolved), for the terminal and the
-/// report.
-fn posterior_warnings(cal: &Calibration, prior: (f64, f64)) -> Vec<GridWarning> {
-    match &cal.module3().posterior {
-        ThetaPosterior::Grid(g) => g.warnings(prior),
-        ThetaPosterior::Mcmc(_) => vec![],
-    }
 }
 
 fn print_summary(cal: &Calibration, dir: &Path) {

@@ -89,7 +89,7 @@ fn deck_arguments_are_checked() {
             "--out",
             "y.inp",
         ],
-        &["--gate"],
+        &["--gate-inp", "cannot be used with", "--gate <GATE>"],
     );
     let missing = d.join("missing.inp");
     let spec = d.join("s.toml");
