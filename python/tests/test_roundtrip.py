@@ -76,3 +76,34 @@ def test_a_field_record_and_its_close_loop_equal_the_cli(gate, cli, tmp_path):
     # the record object gives the same report as its file
     from_record = bamudi.close_loop(gate, rec, seed=4, **args)
     assert from_record["theta_after"] == py_report["theta_after"]
+
+
+REALITY = """# the gate as built departs from the drawing the calibration uses
+[as_built.skin_plate]
+thickness = 0.55
+[as_built.gauges.SG3]
+direction = [0.9962, 0.0872, 0.0]
+[[sensors]]
+gauge = "SG5"
+drift_microstrain = 6.0
+"""
+
+
+def test_data_from_a_reality_and_their_calibration_equal_the_cli(gate, experiments, cli, tmp_path):
+    # the truth is not the calibration's model here: an as-built skin, a turned gauge and a
+    # drifting one; Python and the command line must still agree to the last digit
+    (tmp_path / "reality.toml").write_text(REALITY)
+    (tmp_path / "cal.toml").write_text(CONFIG_TOML)
+    real = bamudi.simulate_experiments(gate, scenario=1, n=60, seed=1, reality=tmp_path / "reality.toml")
+    assert not np.array_equal(real.data[:, 2:], experiments.data[:, 2:]), "the reality changed nothing"
+    done = cli("--seed", 1, "simulate", "experiments", "--scenario", 1, "--n", 60,
+               "--reality", "reality.toml", "--out", "real.csv", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "real.csv").read_text() == real.to_csv()
+    done = cli("calibrate", "--config", "cal.toml", "--data", "real.csv", "--out", "res", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    results = json.loads((tmp_path / "res" / "results.json").read_text())
+    cal = bamudi.calibrate(gate, real, str(tmp_path / "cal.toml"))
+    post = results["theta"]["with_discrepancy"]
+    assert (cal.theta_mean, cal.theta_sd) == (post["mean"][0], post["sd"][0])
+    assert cal.adequacy == results["adequacy"]
