@@ -50,6 +50,10 @@ pub struct CoverageArgs {
     /// Marginal mode: keep the discrepancy where the model's response vanishes (the gap).
     #[arg(long)]
     no_support_mask: bool,
+    /// Marginal mode: prior variance of each coefficient function's unknown level, relative
+    /// to the process variance (0: a zero-mean prior).
+    #[arg(long, default_value_t = bamudi::params::DEFAULT_LEVEL_VARIANCE)]
+    level_variance: f64,
     /// Worker threads (0: all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -127,6 +131,7 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
                     a.coefficient_kernel
                 )
             })?,
+        level_variance: a.level_variance,
     };
     Ok(o)
 }

@@ -384,6 +384,13 @@ fn config_toml_round_trip_and_named_errors() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("trainin_size"), "{err}");
+    for bad in ["-1.0", "1e9", "nan"] {
+        let err =
+            CalibrationConfig::from_toml_str(&format!("[marginal]\nlevel_variance = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+        assert!(err.contains("marginal.level_variance"), "{bad}: {err}");
+    }
 }
 
 #[test]

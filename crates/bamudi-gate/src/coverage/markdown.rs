@@ -47,13 +47,18 @@ fn coverage_row(s: &ScenarioCoverage) -> String {
 
 fn prediction_row(s: &ScenarioCoverage) -> String {
     format!(
-        "| {} | {} | {:.3} | {:.3} | {} | {:.3} ± {:.3} [{:.3}, {:.3}] | {:.3} | {:.3} | {:.1} |\n",
+        "| {} | {} | {:.3} | {:.3} | {} | {} | {:.3} ± {:.3} [{:.3}, {:.3}] | {:.3} | {:.3} | {:.1} |\n",
         s.name,
         mode_label(s.mode),
         s.force_band_coverage_95.normal,
         s.force_band_coverage_95.tangential,
         s.fatigue_band_coverage_95
             .map_or("not measured".to_string(), |v| format!("{v:.3}")),
+        s.force_band_halfwidth_ratio_median
+            .map_or("not measured".to_string(), |h| format!(
+                "{:.3} / {:.3}",
+                h.normal, h.tangential
+            )),
         s.rho[0],
         s.rho[1],
         s.rho[2],
@@ -73,7 +78,7 @@ impl CoverageReport {
             "Gate: {} DOF ({} in elements). Per scenario {} replicates, each with θ* drawn from \
              the prior, {} experiments with fresh water levels and noise (σ = {} µε) and the \
              discrepancy shape `{}`; estimator {}; marginal-mode prior: kernel `{}`, scales `{}`, \
-             support mask {}; {} new water-level pairs per replicate for the force bands; seed {}. \
+             support mask {}, level variance {:e}; {} new water-level pairs per replicate for the force bands; seed {}. \
              Wall time {:.0} s.\n\n",
             self.n_dofs,
             self.element_size,
@@ -89,6 +94,7 @@ impl CoverageReport {
             } else {
                 "off"
             },
+            o.marginal.level_variance,
             o.new_conditions,
             o.seed,
             self.total_s,
@@ -108,11 +114,13 @@ impl CoverageReport {
         s.push_str(
             "\nModule-4 predictions: mean fraction of condition × quoin-point pairs inside the 95 % \
              force bands, and inside the 95 % band of the quoin-block fatigue damage rate (the \
-             prediction level, points with damage only); ρ over replicates (mean ± sd [min, max]; the posterior mean in the \
+             prediction level, points with damage only); the bands' median half-width over \
+             the force RMSE before calibration (normal / tangential: how wide a band is against \
+             the error it corrects); ρ over replicates (mean ± sd [min, max]; the posterior mean in the \
              marginal mode, ρ* otherwise); median force RMSE after / before; seconds per replicate.\n\n",
         );
-        s.push_str("| scenario | mode | band normal | band tangential | band fatigue | ρ | RMSE ratio normal | RMSE ratio tangential | s / replicate |\n");
-        s.push_str("|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("| scenario | mode | band normal | band tangential | band fatigue | half-width / RMSE before | ρ | RMSE ratio normal | RMSE ratio tangential | s / replicate |\n");
+        s.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
         self.scenarios
             .iter()
             .for_each(|r| s.push_str(&prediction_row(r)));

@@ -174,6 +174,10 @@ pub struct Replicate {
     pub band_fatigue: Option<f64>,
     /// Force RMSE before/after (lbf/in).
     pub force_rmse: ForceRmse,
+    /// Mean half-width of the 95 % force bands over the condition × point pairs (lbf/in);
+    /// `None` in reports saved before it was measured.
+    #[serde(default)]
+    pub band_halfwidth: Option<NormalTangential>,
     /// Seconds for the calibration and its scores.
     pub seconds: f64,
 }
@@ -232,6 +236,11 @@ pub struct ScenarioCoverage {
     pub rho: [f64; 4],
     /// Median over replicates of force RMSE after / before.
     pub force_rmse_ratio_median: NormalTangential,
+    /// Median over replicates of the mean 95 % band half-width / force RMSE before: how wide
+    /// the bands are against the error they correct (`None` when a replicate did not measure
+    /// it).
+    #[serde(default)]
+    pub force_band_halfwidth_ratio_median: Option<NormalTangential>,
     /// Root mean square of `(mean − θ*)/sd` (1 for a calibrated Gaussian posterior).
     pub z_rms: f64,
     /// Median posterior sd of `θ` (in).
@@ -436,6 +445,7 @@ impl Setup<'_> {
             band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
             band_fatigue: Some(fatigue.0 as f64 / fatigue.1.max(1) as f64),
             force_rmse: tally.rmse(),
+            band_halfwidth: Some(tally.halfwidth()),
             seconds: 0.0,
         })
     }
@@ -475,6 +485,7 @@ struct BandTally {
     n: [usize; 2],
     ss_before: [f64; 2],
     ss_after: [f64; 2],
+    half: [f64; 2],
 }
 
 impl BandTally {
@@ -484,6 +495,16 @@ impl BandTally {
         self.inside[c] += usize::from(band.lower[p] <= truth && truth <= band.upper[p]);
         self.ss_before[c] += (before - truth).powi(2);
         self.ss_after[c] += (band.mean[p] - truth).powi(2);
+        self.half[c] += 0.5 * (band.upper[p] - band.lower[p]);
+    }
+
+    /// Mean band half-width (lbf/in).
+    fn halfwidth(&self) -> NormalTangential {
+        let m = |c: usize| self.half[c] / self.n[c].max(1) as f64;
+        NormalTangential {
+            normal: m(0),
+            tangential: m(1),
+        }
     }
 
     fn rmse(&self) -> ForceRmse {
@@ -562,10 +583,31 @@ fn summarise(
                     .map(|r| r.force_rmse.tangential_after / r.force_rmse.tangential_before),
             ),
         },
+        force_band_halfwidth_ratio_median: halfwidth_ratio(&reps),
         z_rms: mean(&|r| ((r.theta_mean - r.theta_true) / r.theta_sd).powi(2)).sqrt(),
         theta_sd_median: median(reps.iter().map(|r| r.theta_sd)),
         seconds: reps.iter().map(|r| r.seconds).sum(),
         replicates: reps,
+    })
+}
+
+/// Median band half-width / RMSE before, per component, if every replicate measured it.
+fn halfwidth_ratio(reps: &[Replicate]) -> Option<NormalTangential> {
+    let ratios: Option<Vec<(f64, f64)>> = reps
+        .iter()
+        .map(|r| {
+            r.band_halfwidth.map(|h| {
+                (
+                    h.normal / r.force_rmse.normal_before,
+                    h.tangential / r.force_rmse.tangential_before,
+                )
+            })
+        })
+        .collect();
+    let ratios = ratios.filter(|v| !v.is_empty())?;
+    Some(NormalTangential {
+        normal: median(ratios.iter().map(|r| r.0)),
+        tangential: median(ratios.iter().map(|r| r.1)),
     })
 }
 

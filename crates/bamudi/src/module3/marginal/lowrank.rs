@@ -57,11 +57,12 @@ impl LowRank {
             .enumerate()
             .map(|(k, p)| {
                 let a = amps.column(k);
-                let m = p.matrix(x, x);
-                eigen_factor(
+                let m = p.correlation_matrix(x, x);
+                let f = eigen_factor(
                     &DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| a[i] * a[j] * m[(i, j)]),
                     tol,
-                )
+                )?;
+                Ok(with_level(f, &a.into_owned(), p.level_variance))
             })
             .collect::<Result<Vec<_>>>()?;
         let mut offsets = vec![0];
@@ -165,6 +166,21 @@ fn eigen_factor(k: &DMatrix<f64>, tol: f64) -> Result<DMatrix<f64>> {
         let j = kept[c];
         eig.vectors[(i, j)] * eig.values[j].sqrt()
     }))
+}
+
+/// The factor `F` of a coefficient's scaled correlation matrix with the level's column
+/// `√c a` appended (`c` the level variance; none when `c = 0`): `F Fᵀ` gains `c a aᵀ`. The
+/// level is a column of its own rather than a constant added before the eigen-decomposition,
+/// whose tolerance (relative to the largest eigenvalue) would then drop the process's smaller
+/// directions.
+fn with_level(f: DMatrix<f64>, a: &DVector<f64>, level_variance: f64) -> DMatrix<f64> {
+    if level_variance <= 0.0 {
+        return f;
+    }
+    let n = f.ncols();
+    let mut out = f.insert_column(n, 0.0);
+    out.column_mut(n).copy_from(&(a * level_variance.sqrt()));
+    out
 }
 
 /// `WᵀW` by blocks: `(F_kᵀ F_l) (b_k · b_l)`.
