@@ -9,8 +9,8 @@
 //! function gets a Gaussian-process prior `α_k(x) = √s a_k(x) (z_k(x) + β_k)`: `z_k` has
 //! Module 2's length scales times one common factor, with Module 2's kernel or a Matérn 5/2
 //! ([`MarginalPrior::kernel`]); `β_k ~ N(0, c)` is the function's unknown level
-//! ([`MarginalPrior::level_variance`]; `c = 0` by default: a zero-mean prior); `a_k(x)` is the standard deviation `h(x)/√3` of the sampling
-//! rule's uniform coefficient range `±h(x)` at `x` (the prior the estimator of Eq. 29 learns
+//! ([`MarginalPrior::level_variance`]; `c = 0` by default: a zero-mean prior); `a_k(x)` is
+//! the standard deviation `h(x)/√3` of the sampling rule's uniform coefficient range `±h(x)` at `x` (the prior the estimator of Eq. 29 learns
 //! under), by default the largest `h` of the coefficient's response component
 //! ([`CoefficientScales`]); and `s` is one amplitude. Integrating `α` out gives
 //! `y ~ N(ρ a(θ) + b(θ), V)` with `V = s Σ_k K_k ⊗ b_k b_kᵀ + σ² I`: the structure of Eq. 51
