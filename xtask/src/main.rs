@@ -57,6 +57,10 @@ enum Task {
         /// Run the sensitivity study even with `--quick`.
         #[arg(long)]
         sensitivity: bool,
+        /// The marginal mode's level variance of the discrepancy coefficient functions
+        /// (`MarginalPrior::level_variance`; default the library's, 0).
+        #[arg(long)]
+        level_variance: Option<f64>,
     },
     /// The coverage study: do the θ intervals and force bands hold the truth as often as they
     /// claim? (simulation-based calibration over replicate data sets)
@@ -96,7 +100,15 @@ fn main() -> Result<()> {
             seed,
             no_sensitivity,
             sensitivity,
-        } => reproduce(quick, json, out, seed, no_sensitivity, sensitivity),
+            level_variance,
+        } => reproduce(
+            quick,
+            json,
+            out,
+            seed,
+            (no_sensitivity, sensitivity),
+            level_variance,
+        ),
         Task::Coverage(args) => coverage::run(&args),
         Task::Adequacy(args) => adequacy::run(&args),
         Task::Bench(args) => bench::run(&args),
@@ -121,8 +133,8 @@ fn reproduce(
     json: Option<PathBuf>,
     out: PathBuf,
     seed: u64,
-    no_sensitivity: bool,
-    sensitivity: bool,
+    (no_sensitivity, sensitivity): (bool, bool),
+    level_variance: Option<f64>,
 ) -> Result<()> {
     let mut opts = if quick {
         ReproduceOptions::quick()
@@ -130,6 +142,9 @@ fn reproduce(
         ReproduceOptions::paper()
     };
     opts.seed = seed;
+    if let Some(c) = level_variance {
+        opts.marginal_prior.level_variance = c;
+    }
     opts.sensitivity = (opts.sensitivity || sensitivity) && !no_sensitivity;
     opts.progress = std::env::var_os("CI").is_none();
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;

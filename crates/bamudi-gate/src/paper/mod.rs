@@ -71,6 +71,9 @@ pub struct ReproduceOptions {
     /// Also run the marginal-coefficient variant ([`CoefficientMode::Marginal`]).
     #[serde(default)]
     pub marginal: bool,
+    /// The marginal mode's prior of the discrepancy coefficients (default: the library's).
+    #[serde(default)]
+    pub marginal_prior: bamudi::MarginalPrior,
     /// Master seed.
     pub seed: u64,
     /// Progress bars.
@@ -98,6 +101,7 @@ impl ReproduceOptions {
             gauge_noise_sd: 1.0,
             conditional: true,
             marginal: true,
+            marginal_prior: bamudi::MarginalPrior::default(),
             seed: 2021,
             progress: true,
         }
@@ -122,6 +126,7 @@ impl ReproduceOptions {
             gauge_noise_sd: 1.0,
             conditional: true,
             marginal: true,
+            marginal_prior: bamudi::MarginalPrior::default(),
             seed: 2021,
             progress: false,
         }
@@ -340,6 +345,7 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
         .training_size(opts.training_size)
         .theta_grid_points(opts.theta_grid_points)
         .sampling(sampling.noise_sd(opts.gauge_noise_sd))
+        .marginal(opts.marginal_prior.clone())
         .seed(opts.seed)
 }
 
