@@ -106,7 +106,8 @@ fn main() -> Result<()> {
             json,
             out,
             seed,
-            (no_sensitivity, sensitivity),
+            no_sensitivity,
+            sensitivity,
             level_variance,
         ),
         Task::Coverage(args) => coverage::run(&args),
@@ -133,7 +134,8 @@ fn reproduce(
     json: Option<PathBuf>,
     out: PathBuf,
     seed: u64,
-    (no_sensitivity, sensitivity): (bool, bool),
+    no_sensitivity: bool,
+    sensitivity: bool,
     level_variance: Option<f64>,
 ) -> Result<()> {
     let mut opts = if quick {
