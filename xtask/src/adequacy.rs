@@ -47,6 +47,11 @@ pub struct AdequacyArgs {
     /// Output directory of `adequacy.md` and the runs' files (`target/adequacy` for the runs).
     #[arg(long, default_value = "docs/results")]
     out: PathBuf,
+    /// Marginal mode: prior variance of each coefficient function's unknown level, relative
+    /// to the process variance (written to every run's `cal.toml` as
+    /// `[calibration.marginal] level_variance`; unset, the library's default, 0).
+    #[arg(long)]
+    level_variance: Option<f64>,
 }
 
 /// One deviation of the matrix.
@@ -183,6 +188,19 @@ pub fn run(a: &AdequacyArgs) -> Result<()> {
     Ok(())
 }
 
+/// The runs' `bamudi calibrate --config` text: the gap prior `(lo, hi)` (in), the exact
+/// estimator, and the marginal prior's level variance when given.
+fn calibration_toml(prior: (f64, f64), level_variance: Option<f64>) -> String {
+    let mut cfg = format!(
+        "gap_prior = [{}, {}]\n[calibration.estimator]\nkind = \"exact_linear\"\n",
+        prior.0, prior.1
+    );
+    if let Some(c) = level_variance {
+        cfg.push_str(&format!("[calibration.marginal]\nlevel_variance = {c:e}\n"));
+    }
+    cfg
+}
+
 /// Builds the release CLI and returns its path.
 fn build_cli() -> Result<PathBuf> {
     let st = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
@@ -244,11 +262,7 @@ fn one_run(bin: &Path, work: &Path, a: &AdequacyArgs, c: &Cell, seed: u64, s: u8
         sim.extend(["--reality".to_string(), p("reality.toml")]);
     }
     cli(bin, &sim)?;
-    let cfg = format!(
-        "gap_prior = [{}, {}]\n[calibration.estimator]\nkind = \"exact_linear\"\n",
-        prior.0, prior.1
-    );
-    std::fs::write(p("cal.toml"), cfg)?;
+    std::fs::write(p("cal.toml"), calibration_toml(prior, a.level_variance))?;
     let mut cal = common;
     cal.extend(
         [
@@ -369,7 +383,7 @@ fn clopper_pearson_upper(k: usize, n: usize) -> f64 {
 
 fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
     let mut s = format!(
-        "# The adequacy verdict on realities that differ from the model\n\n`cargo xtask adequacy --seeds {} --clean-seeds {} --scenarios {} --experiments {} --mesh {} --seed {}`: \
+        "# The adequacy verdict on realities that differ from the model\n\n`cargo xtask adequacy --seeds {} --clean-seeds {} --scenarios {} --experiments {} --mesh {} --seed {}{}`: \
          each run simulates {} experiments with `bamudi simulate experiments --reality reality.toml` and calibrates them with the drawing \
          (`bamudi calibrate`, exact estimator, marginal mode, family-wise error 0.01). Silent miss: the gap's 95 % interval misses the \
          truth and the verdict is \"adequate\". Right cause: \"inadequate\", every failure attributed to a sensor and the sensor correction \
@@ -384,6 +398,8 @@ fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
         a.experiments,
         a.mesh,
         a.seed,
+        a.level_variance
+            .map_or(String::new(), |c| format!(" --level-variance {c:e}")),
         a.experiments
     );
     let mut keys: Vec<(String, u64)> = Vec::new();
@@ -432,4 +448,26 @@ fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
     }
     s += &format!("\nSilent misses over all {total} runs: {silent}.\n");
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bamudi_gate::session::CalibrateSpec;
+
+    /// The runs' configuration is read by the CLI's own parser as meant: the level variance
+    /// (written in exponent form) when given, the library's default when not.
+    #[test]
+    fn the_runs_configuration_carries_the_level_variance() {
+        for (level, want) in [
+            (Some(1e3), 1e3),
+            (Some(0.0), 0.0),
+            (None, bamudi::params::DEFAULT_LEVEL_VARIANCE),
+        ] {
+            let text = calibration_toml((81.0, 105.0), level);
+            let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
+            assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
+            assert_eq!(spec.calibration.marginal.level_variance, want, "{text}");
+        }
+    }
 }
