@@ -1,14 +1,15 @@
 //! Developer tasks for the bamudi workspace (`cargo xtask <task>`, run in release mode).
 //!
-//! * `reproduce-paper [--quick] [--json PATH] [--out DIR]`: both scenarios of the paper's Table 1
-//!   on the embedded default gate; writes `docs/results/reproduce-paper.md` and plots.
+//! * `reproduce-paper [--quick] [--json PATH] [--out DIR] [--seed N] [--level-variance C]`:
+//!   both scenarios of the paper's Table 1 on the embedded default gate; writes
+//!   `docs/results/reproduce-paper.md` and plots.
 //! * `coverage [--quick] [--estimator exact|lstm|ridge] [--replicates N] [--experiments N]
 //!   [--mesh IN] [--modes LIST] [--threads N] [--seed N] [--json PATH] [--out DIR]`: the
 //!   coverage study of the θ intervals and force bands; writes `docs/results/coverage*.md`.
 //! * `adequacy [--seeds N] [--clean-seeds N] [--scenarios LIST] [--experiments N] [--mesh IN]
-//!   [--seed N] [--only TEXT] [--json PATH] [--out DIR]`: the adequacy verdict over a matrix of
-//!   as-built gates and sensor faults, and its false-alarm rate on clean data; writes
-//!   `docs/results/adequacy.md`.
+//!   [--seed N] [--only TEXT] [--level-variance C] [--json PATH] [--out DIR]`: the adequacy
+//!   verdict over a matrix of as-built gates and sensor faults, and its false-alarm rate on
+//!   clean data; writes `docs/results/adequacy.md`.
 //! * `calculix-check [--element-size IN] [--dir DIR] [--ccx PATH] [--equation] [--report PATH]`:
 //!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
 //!   displacements (needs `ccx` on PATH; see docs/verification.md).
@@ -38,30 +39,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Task {
     /// Reproduce the paper's case study (Sec. 4.3, Table 1, Fig. 13-22) end to end.
-    ReproducePaper {
-        /// CI-sized run (coarser mesh, fewer experiments, exact linear estimator).
-        #[arg(long)]
-        quick: bool,
-        /// Also write the numbers as JSON to this path.
-        #[arg(long)]
-        json: Option<PathBuf>,
-        /// Output directory for the report and plots.
-        #[arg(long, default_value = "docs/results")]
-        out: PathBuf,
-        /// Master seed.
-        #[arg(long, default_value_t = 2021)]
-        seed: u64,
-        /// Skip the sampling-rule sensitivity study.
-        #[arg(long)]
-        no_sensitivity: bool,
-        /// Run the sensitivity study even with `--quick`.
-        #[arg(long)]
-        sensitivity: bool,
-        /// The marginal mode's level variance of the discrepancy coefficient functions
-        /// (`MarginalPrior::level_variance`; default the library's, 0).
-        #[arg(long)]
-        level_variance: Option<f64>,
-    },
+    ReproducePaper(ReproduceArgs),
     /// The coverage study: do the θ intervals and force bands hold the truth as often as they
     /// claim? (simulation-based calibration over replicate data sets)
     Coverage(coverage::CoverageArgs),
@@ -90,26 +68,37 @@ enum Task {
     },
 }
 
+/// The choices of `reproduce-paper`.
+#[derive(clap::Args)]
+struct ReproduceArgs {
+    /// CI-sized run (coarser mesh, fewer experiments, exact linear estimator).
+    #[arg(long)]
+    quick: bool,
+    /// Also write the numbers as JSON to this path.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Output directory for the report and plots.
+    #[arg(long, default_value = "docs/results")]
+    out: PathBuf,
+    /// Master seed.
+    #[arg(long, default_value_t = 2021)]
+    seed: u64,
+    /// Skip the sampling-rule sensitivity study.
+    #[arg(long)]
+    no_sensitivity: bool,
+    /// Run the sensitivity study even with `--quick`.
+    #[arg(long)]
+    sensitivity: bool,
+    /// The marginal mode's level variance of the discrepancy coefficient functions
+    /// (`MarginalPrior::level_variance`; default the library's, 0).
+    #[arg(long)]
+    level_variance: Option<f64>,
+}
+
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.task {
-        Task::ReproducePaper {
-            quick,
-            json,
-            out,
-            seed,
-            no_sensitivity,
-            sensitivity,
-            level_variance,
-        } => reproduce(
-            quick,
-            json,
-            out,
-            seed,
-            no_sensitivity,
-            sensitivity,
-            level_variance,
-        ),
+        Task::ReproducePaper(args) => reproduce(&args),
         Task::Coverage(args) => coverage::run(&args),
         Task::Adequacy(args) => adequacy::run(&args),
         Task::Bench(args) => bench::run(&args),
@@ -129,27 +118,20 @@ fn main() -> Result<()> {
     }
 }
 
-fn reproduce(
-    quick: bool,
-    json: Option<PathBuf>,
-    out: PathBuf,
-    seed: u64,
-    no_sensitivity: bool,
-    sensitivity: bool,
-    level_variance: Option<f64>,
-) -> Result<()> {
-    let mut opts = if quick {
+fn reproduce(a: &ReproduceArgs) -> Result<()> {
+    let mut opts = if a.quick {
         ReproduceOptions::quick()
     } else {
         ReproduceOptions::paper()
     };
-    opts.seed = seed;
-    if let Some(c) = level_variance {
+    opts.seed = a.seed;
+    if let Some(c) = a.level_variance {
         opts.marginal_prior.level_variance = c;
     }
-    opts.sensitivity = (opts.sensitivity || sensitivity) && !no_sensitivity;
+    opts.sensitivity = (opts.sensitivity || a.sensitivity) && !a.no_sensitivity;
     opts.progress = std::env::var_os("CI").is_none();
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let out = &a.out;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     bamudi_gate::progress::init_logging(false);
     let bars = if opts.progress {
         Bars::new()
@@ -165,7 +147,7 @@ fn reproduce(
             res.theta_posterior.sd,
             res.theta_true
         );
-        plots::scenario_plots(&out, res, cal, model, &opts).map_err(|e| {
+        plots::scenario_plots(out, res, cal, model, &opts).map_err(|e| {
             bamudi_gate::GateAppError::Engine(bamudi::BamudiError::Calibration(format!(
                 "plots: {e:#}"
             )))
@@ -173,14 +155,14 @@ fn reproduce(
     })?;
     let md = report.markdown();
     println!("{md}");
-    let md_path = out.join(if quick {
+    let md_path = out.join(if a.quick {
         "reproduce-paper-quick.md"
     } else {
         "reproduce-paper.md"
     });
     bamudi::data::write_atomic(&md_path, md.as_bytes())?;
-    if let Some(path) = json {
-        bamudi::data::write_atomic(&path, report.to_json()?.as_bytes())?;
+    if let Some(path) = &a.json {
+        bamudi::data::write_atomic(path, report.to_json()?.as_bytes())?;
     }
     eprintln!("wrote {}", md_path.display());
     Ok(())
