@@ -352,6 +352,12 @@ pub struct MarginalPrior {
     /// an unknown flat-prior level (ordinary kriging): it makes the `θ` intervals of the
     /// coverage study honest and costs the force predictions accuracy; see
     /// [`crate::module3::marginal`] for the measurements.
+    ///
+    /// ```
+    /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = 1e3").unwrap();
+    /// assert_eq!(cfg.clone().into_params().marginal.level_variance, 1e3);
+    /// assert!(bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = -1").is_err());
+    /// ```
     pub level_variance: f64,
 }
 
