@@ -9,7 +9,7 @@
 //! function gets a Gaussian-process prior `α_k(x) = √s a_k(x) (z_k(x) + β_k)`: `z_k` has
 //! Module 2's length scales times one common factor, with Module 2's kernel or a Matérn 5/2
 //! ([`MarginalPrior::kernel`]); `β_k ~ N(0, c)` is the function's unknown level
-//! ([`MarginalPrior::level_variance`]; `c = 0` by default: a zero-mean prior); `a_k(x)` is
+//! ([`MarginalPrior::level_variance`]; `c = 1e3` by default); `a_k(x)` is
 //! the standard deviation `h(x)/√3` of the sampling rule's uniform coefficient range `±h(x)` at `x` (the prior the estimator of Eq. 29 learns
 //! under), by default the largest `h` of the coefficient's response component
 //! ([`CoefficientScales`]); and `s` is one amplitude. Integrating `α` out gives
@@ -47,10 +47,12 @@
 //! `level_variance = 1e3` both scenarios still pass every level and the SBC test (SBC p 0.35
 //! and 0.35, median sd 0.16-0.17 in) at a force RMSE after / before of 0.042 and 0.068, and at
 //! paper size the normal force is corrected 15x and 27x
-//! (`docs/results/coverage-quick-level-1e3.md`, `docs/results/reproduce-paper-level-1e3.md`).
-//! The default stays 0: against the adequacy matrix that setting still misses θ* = 90 in on
-//! clean data (a 0.11 in bias there, 3 of 21 seeds) and hides a gauge's 5 % gain error
-//! (`docs/results/adequacy.md`), and the paper-size coverage study has not been run with it.
+//! (`docs/results/coverage-quick.md`, `docs/results/reproduce-paper.md`).
+//! `1e3` is the default ([`crate::params::DEFAULT_LEVEL_VARIANCE`]): the zero-mean prior's θ
+//! intervals fail the coverage study in scenario 1 (quick: 50 % coverage 0.38, SBC p < 0.001),
+//! and intervals are claims before the force is a prediction. What it leaves open: against the
+//! adequacy matrix it still misses θ* = 90 in on clean data (a 0.11 in bias there, 3 of 21
+//! seeds) and hides a gauge's 5 % gain error (`docs/results/adequacy.md`).
 //!
 //! # What is integrated, what is estimated
 //!
