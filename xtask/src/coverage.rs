@@ -62,7 +62,8 @@ pub struct CoverageArgs {
     seed: u64,
     /// Also write the report as JSON here. While the study runs, each finished replicate is
     /// appended as one JSON line to `PATH.partial.jsonl` (scenario, then one result per mode),
-    /// so a long study can be read, or its finished part kept, before it ends.
+    /// so a long study can be read, or its finished part kept, before it ends; the log is
+    /// removed once the report is written.
     #[arg(long)]
     json: Option<PathBuf>,
     /// Re-render the markdown and plots of a saved `--json` report (no calibration runs); the
@@ -164,6 +165,13 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     rank_plot(&a.out.join(format!("sbc{tag}.svg")), &report)?;
     if let (Some(path), None) = (&a.json, &a.render) {
         bamudi::data::write_atomic(path, report.to_json()?.as_bytes())?;
+        // every finished replicate is in the report now: the running log has done its job
+        let log = ReplicateLog::path_for(path);
+        if let Err(e) = std::fs::remove_file(&log)
+            && e.kind() != std::io::ErrorKind::NotFound
+        {
+            eprintln!("warning: could not remove {}: {e}", log.display());
+        }
     }
     eprintln!("wrote {}", md_path.display());
     Ok(())
@@ -198,10 +206,15 @@ struct ReplicateLog {
 }
 
 impl ReplicateLog {
-    fn create(json: &Path) -> Result<Self> {
+    /// `PATH.partial.jsonl` for the report's `PATH`.
+    fn path_for(json: &Path) -> PathBuf {
         let mut name = json.as_os_str().to_owned();
         name.push(".partial.jsonl");
-        let path = PathBuf::from(name);
+        PathBuf::from(name)
+    }
+
+    fn create(json: &Path) -> Result<Self> {
+        let path = Self::path_for(json);
         let file = std::fs::File::create(&path)
             .with_context(|| format!("creating the replicate log {}", path.display()))?;
         eprintln!("finished replicates go to {}", path.display());

@@ -3,7 +3,7 @@
 //! paper's discrepancy (Eq. 53-54, a shape the calibration's basis does not contain), on the
 //! 24-in mesh with the exact estimator, calibrated in the default (marginal) mode — with 60
 //! experiments per data set, half of `cargo xtask coverage --quick` (120), so that the test takes
-//! 197 s instead of 444 s on 2 cores (issue 20).
+//! about half as long (issue 20).
 //!
 //! The claim tested is the nominal level of the 95 % `θ` interval: the number of replicates
 //! whose interval holds `θ*` must lie in the 1 % binomial acceptance region of p = 0.95 for
@@ -23,7 +23,8 @@
 //! The default prior (Matérn 5/2, shared scales, support mask) was chosen over the squared
 //! exponential at 120 experiments and seed 2021 and on three other discrepancy shapes
 //! (docs/results/coverage-shapes.md lists them all); the level variance 1e3 was chosen among
-//! 0, 1e2, 1e3 and 1e4 on the same quick study (README, "The level variance as a trade-off").
+//! 0, 1e2, 1e3 and 1e4 on the same quick study (README, "Why each coefficient function has an
+//! unknown level").
 //! The size here, 60 experiments, was not used in those choices; the seed was, and the
 //! replicates' `θ*` draws are shared with it. What this test guards is regressions; the
 //! paper-size study (another seed, 500 experiments) is the independent check.

@@ -42,7 +42,8 @@
 //! every level and the SBC test in both scenarios (scenario 1: 50 % coverage 0.50, SBC p 0.79,
 //! median sd 0.173 in instead of 0.070) and stays calibrated with no discrepancy; but the
 //! force's posterior mean is 4x less accurate there (RMSE after / before 0.10 instead of
-//! 0.025) and at paper size scenario 1's normal force is corrected 3.3x instead of 32x: the
+//! 0.025) and at paper size scenario 1's normal force is corrected 3.3x (32x with the zero-mean
+//! prior, 15x with the default 1e3): the
 //! levels of the directions the gauges see only weakly are poorly determined. With
 //! `level_variance = 1e3` both scenarios still pass every level and the SBC test (SBC p 0.35
 //! and 0.35, median sd 0.16-0.17 in) at a force RMSE after / before of 0.042 and 0.068, and at
@@ -51,13 +52,13 @@
 //! `1e3` is the default ([`crate::params::DEFAULT_LEVEL_VARIANCE`]): the zero-mean prior's θ
 //! intervals fail the coverage study in scenario 1 (quick: 50 % coverage 0.38, SBC p < 0.001),
 //! and intervals are claims before the force is a prediction. What it leaves open: against the
-//! adequacy matrix it still misses θ* = 90 in on clean data (a 0.11 in bias there, 3 of 21
+//! adequacy matrix it still misses θ* = 90 in on clean data (a 0.10 in bias there, 8 of 110
 //! seeds) and hides a gauge's 5 % gain error (`docs/results/adequacy.md`).
 //!
 //! # What is integrated, what is estimated
 //!
 //! * `α` (every coefficient direction, including those the gauges cannot see, and the
-//!   levels `β` when configured): analytically; each level is one more column of the
+//!   levels `β` unless `level_variance = 0`): analytically; each level is one more column of the
 //!   low-rank factor.
 //! * `ρ`: analytically over its uniform prior (the sampling rule's `rho_range`; [`rho`]).
 //! * `θ`: on the grid (or by MCMC) of [`super::grid`].
