@@ -373,10 +373,11 @@ pub const MAX_LEVEL_VARIANCE: f64 = 1e8;
 /// finds improbable, so `ρ` and `θ` move instead. With `1e3` the quick study's levels and SBC
 /// tests pass in both scenarios (SBC p 0.35 and 0.35) with the force's posterior mean 1.7-2.7
 /// times less accurate than at `0`, and at paper size the normal force is still corrected
-/// 15-27x (README, "Why each coefficient function has an unknown level"). A vague level (`1e4`) costs the force
-/// more (paper size: 3.3x). What `1e3` does not fix, measured: on clean data at θ* = 90 in the
-/// posterior mean sits 0.10 in high (8 misses in 110 clean seeds of the adequacy matrix), and it hides
-/// a gauge's 5 % gain error that `0` flags 2 times in 3 (`docs/results/adequacy.md`).
+/// 15-27x (README, "Why each coefficient function has an unknown level"). A vague level
+/// (`1e4`) costs the force more (paper size: 3.3x). What `1e3` does not fix, measured: on clean
+/// data at θ* = 90 in the posterior mean sits 0.10 in high (8 misses in 110 clean seeds of the
+/// adequacy matrix), and it hides a gauge's 5 % gain error that `0` flags 2 times in 3
+/// (`docs/results/adequacy.md`).
 pub const DEFAULT_LEVEL_VARIANCE: f64 = 1e3;
 
 /// The correlation family of the marginal mode's coefficient functions.

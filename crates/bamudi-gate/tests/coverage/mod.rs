@@ -24,10 +24,9 @@
 //! exponential at 120 experiments and seed 2021 and on three other discrepancy shapes
 //! (docs/results/coverage-shapes.md lists them all); the level variance 1e3 was chosen among
 //! 0, 1e2, 1e3 and 1e4 on the same quick study (README, "Why each coefficient function has an
-//! unknown level").
-//! The size here, 60 experiments, was not used in those choices; the seed was, and the
-//! replicates' `θ*` draws are shared with it. What this test guards is regressions; the
-//! paper-size study (another seed, 500 experiments) is the independent check.
+//! unknown level"). The size here, 60 experiments, was not used in those choices; the seed
+//! was, and the replicates' `θ*` draws are shared with it. What this test guards is
+//! regressions; the paper-size study (another seed, 500 experiments) is the independent check.
 
 use bamudi::validation::{Coverage, binomial_acceptance};
 use bamudi_gate::coverage::{self, CoverageOptions, ScenarioCoverage};
