@@ -217,3 +217,24 @@ fn an_eight_percent_thinner_web_is_covered_or_flagged() {
         r["adequacy"]
     );
 }
+
+/// Another as-built field under the default prior: steel 5 % softer than drawn (27.55e6 psi
+/// against 29e6), seed 46 (not a matrix seed). The claim is the full one of the web test above:
+/// the interval holds the truth, or the verdict is "inadequate" and blames no sensor. Chosen
+/// before the first run; the matrix (with the level) named the right cause for this magnitude
+/// 3 times in 3 on seeds 3000-3002. First run: 89.72 ± 0.25 in [89.22, 90.20], "inadequate"
+/// with every failure (four gauges' gain tests, the tension check) attributed to the model's form.
+#[test]
+fn a_softer_steel_is_covered_or_called_a_model_deviation() {
+    let (r, _, _) = calibrate(
+        "as_built_soft_steel",
+        46,
+        Some("[as_built.material]\nyoungs_modulus = 27.55e6\n"),
+    );
+    let f = failed(&r);
+    assert!(
+        covered(&r, 90.0) || (verdict(&r) == "inadequate" && f.iter().all(|(_, a)| a != "sensor")),
+        "{}\n{f:?}",
+        r["theta"]["with_discrepancy"]
+    );
+}
