@@ -413,6 +413,7 @@ impl ContactModel {
     pub fn solve(&self, h_up: f64, h_down: f64, theta: f64) -> Result<ContactSolution, GateError> {
         self.check_inputs(h_up, h_down, theta)?;
         self.solve_cold(h_up, h_down, theta)
+            .or_else(|e| self.recover_from_neighbours(h_up, h_down, theta, e))
     }
 
     /// Solves like [`ContactModel::solve`], starting from a previous solution (e.g. at a

@@ -32,6 +32,11 @@ const SLOW_CONTRACTION: f64 = 0.05;
 /// h_down = 185.01, θ = 119.47 in on a 24 in mesh).
 const MAX_NEWTON_REJECTIONS: usize = 5;
 
+/// Gap offsets (in) of the neighbouring cold solves that a cold solve which did not converge
+/// restarts from, nearest first and the longer gap first (see "Recovery" in the
+/// [module docs](super)).
+const RECOVERY_GAP_OFFSETS_IN: [f64; 4] = [0.01, -0.01, 0.1, -0.1];
+
 /// What one evaluation keeps fixed: the free water displacement `u_w` (in), the load `K u_w`
 /// (lbf) and the normal springs `s_b` (psi).
 struct Problem {
@@ -92,6 +97,42 @@ impl ContactModel {
         let rigid = self.rigid_line_load(&problem.load);
         let start = self.start_from_normal_forces(&problem, |b| rigid[b].max(0.0));
         self.iterate(&problem, start)
+    }
+
+    /// The documented recovery of a cold solve that did not converge: the solve at `θ` is
+    /// restarted from the cold solution at each gap `θ + d` of [`RECOVERY_GAP_OFFSETS_IN`]
+    /// in turn (inside `[0, H)`), and the first that converges is returned (logged at
+    /// `debug`). The restart meets the same convergence test, and it depends on `(x, θ)` only,
+    /// so `g_BC` stays a function. Any other error, or no converging restart, returns `error`.
+    pub(super) fn recover_from_neighbours(
+        &self,
+        h_up: f64,
+        h_down: f64,
+        theta: f64,
+        error: GateError,
+    ) -> Result<ContactSolution, GateError> {
+        if !matches!(error, GateError::ContactNotConverged { .. }) {
+            return Err(error);
+        }
+        let height = self.gate.quoin_height;
+        for d in RECOVERY_GAP_OFFSETS_IN {
+            let near = theta + d;
+            if !(0.0..height).contains(&near) {
+                continue;
+            }
+            let Ok(start) = self.solve_cold(h_up, h_down, near) else {
+                continue;
+            };
+            if let Ok(sol) = self.solve_warm(h_up, h_down, theta, &start.forces) {
+                log::debug!(
+                    "contact at h_up {h_up}, h_down {h_down}, θ {theta}: cold solve failed \
+                     ({error}); converged in {} iterations from the solution at θ {near}",
+                    sol.iterations
+                );
+                return Ok(sol);
+            }
+        }
+        Err(error)
     }
 
     /// Solves from the normal line loads of a previous solution (`previous_forces`, blocked,
