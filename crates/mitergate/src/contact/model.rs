@@ -73,7 +73,10 @@ impl ContactParams {
         self.tolerance = tolerance;
         self
     }
-    /// Sets the cap on iterations (linear solves) of the contact solve, `≥ 1`.
+    /// Sets the cap on iterations (linear solves) of the contact solve, `≥ 1`. The cap holds
+    /// per attempt: a cold solve that reaches it is restarted from neighbouring gaps ("Recovery"
+    /// in the [module docs](super)), each restart with the same cap, so a failing evaluation
+    /// costs at most nine capped attempts.
     ///
     /// ```
     /// let p = mitergate::contact::ContactParams::default().max_iterations(0);
