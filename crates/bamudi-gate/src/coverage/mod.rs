@@ -301,7 +301,7 @@ pub fn run(opts: &CoverageOptions, on_replicate: OnReplicate) -> Result<Coverage
 struct Setup<'a> {
     contact: &'a ContactModel,
     number: u8,
-    prior: (f64, f64),
+    model: GateMultiLevel,
     opts: &'a CoverageOptions,
 }
 
@@ -312,10 +312,11 @@ fn scenario_replicates(
     opts: &CoverageOptions,
     on_replicate: OnReplicate,
 ) -> Result<Vec<Vec<Replicate>>> {
+    let prior = Scenario::paper(number)?.prior;
     let setup = Setup {
         contact,
         number,
-        prior: Scenario::paper(number)?.prior,
+        model: gate_model(contact, prior)?,
         opts,
     };
     // the first replicate fits the estimator the others reuse
@@ -378,26 +379,24 @@ impl Setup<'_> {
         estimator: Option<&(FittedEstimator, usize)>,
     ) -> Result<(Vec<Replicate>, (FittedEstimator, usize))> {
         let (truth, exps, new_x) = self.truth(r)?;
-        // Each replicate gets its own model: its contact anchor cache then holds that
-        // replicate's anchors only. One model shared by the worker threads overflowed the
-        // cache's budget and cleared it again and again (every replicate has its own water
-        // levels), making two threads slower than one. No result depends on the cache.
-        let model = gate_model(self.contact, self.prior)?;
         let mut fitted = estimator.cloned();
         let mut out = Vec::new();
         for &mode in &self.opts.modes {
             let t = Instant::now();
             let cfg = self.params(mode, r).check()?;
             let cal = match &fitted {
-                Some((est, pool)) => {
-                    Calibrate::new(&cfg).run_with_estimator(&model, &exps, est.clone(), *pool)?
-                }
-                None => Calibrate::new(&cfg).run(&model, &exps)?,
+                Some((est, pool)) => Calibrate::new(&cfg).run_with_estimator(
+                    &self.model,
+                    &exps,
+                    est.clone(),
+                    *pool,
+                )?,
+                None => Calibrate::new(&cfg).run(&self.model, &exps)?,
             };
             let m2 = cal.module2();
             fitted.get_or_insert_with(|| (m2.estimator.clone(), m2.training_pool_size));
             let seed = derive_seed(self.opts.seed, 5000 + r as u64);
-            let mut rep = self.score(&model, &cal, &truth, &new_x, seed)?;
+            let mut rep = self.score(&cal, &truth, &new_x, seed)?;
             (rep.index, rep.seconds) = (r, t.elapsed().as_secs_f64());
             out.push(rep);
         }
@@ -405,10 +404,9 @@ impl Setup<'_> {
         Ok((out, fitted))
     }
 
-    /// The replicate's scores against its truth (`model`: the replicate's own copy).
+    /// The replicate's scores against its truth.
     fn score(
         &self,
-        model: &GateMultiLevel,
         cal: &Calibration,
         truth: &Truth,
         new_x: &[[f64; 2]],
@@ -416,7 +414,7 @@ impl Setup<'_> {
     ) -> Result<Replicate> {
         let post = &cal.module3().posterior;
         let predictor = cal
-            .predictor(model)?
+            .predictor(&self.model)?
             .support_policy(&SupportPolicy::default().max_nodes(BAND_SUPPORT))?;
         let nu = self.contact.gate().n_points();
         let block = QuoinBlockModel::new(
@@ -427,7 +425,7 @@ impl Setup<'_> {
         let mut fatigue = (0usize, 0usize);
         for (k, x) in new_x.iter().enumerate() {
             let truth_f = truth.forces(self.contact, *x)?;
-            let before = prior_mean_response(model, x)?;
+            let before = prior_mean_response(&self.model, x)?;
             let band = predictor.response(x)?;
             for p in 0..2 * nu {
                 tally.add(p < nu, truth_f[p], before[p], &band, p);
