@@ -107,17 +107,17 @@
 //! An iteration cap (default 1000) returns [`GateError::ContactNotConverged`](crate::error::GateError::ContactNotConverged) naming the unmet
 //! criterion, never a silent result.
 //!
-//! **Recovery.** The bilinear tangential law can give the contact zone's upper edge a jump in
-//! `θ`: at h_up = 520.37, h_down = 78.32 in on the 24 in mesh the zone ends six points higher
-//! at θ = 86.729 than at 86.731 in. The jump moves the line loads near the edge by up to
-//! 7600 lbf/in but the gauges' strains by 0.09 µε (a 0.0005 in step of `θ` elsewhere: 0.002 µε
-//! and 600 lbf/in), well below the 1 µε noise. Exactly at such a fold the cold start lands on the ghost of
-//! the branch that has just vanished (a relative law residual stuck at 3e-7 with a 2.4 lbf/in
-//! top point) and creeps off it for hundreds of iterations — past the cap at θ = 86.72995 in,
-//! which stopped a 200-replicate coverage study. A cold solve that hits the cap is therefore
-//! restarted from the cold solutions at `θ + 0.01`, `θ − 0.01`, `θ + 0.1`, `θ − 0.1` in
-//! (`RECOVERY_GAP_OFFSETS_IN`, first convergence wins; logged at `debug`): the same
-//! convergence test, a start that depends only on `(x, θ)`, 12 iterations in that case.
+//! **Recovery.** The bilinear tangential law can give the contact zone's upper edge a jump in `θ`:
+//! at h_up = 520.37, h_down = 78.32 in on the 24 in mesh the zone ends six points higher at θ =
+//! 86.729 than at 86.731 in. The jump moves the line loads near the edge by up to 7600 lbf/in but
+//! the gauges' strains by 0.09 µε (a 0.0005 in step of `θ` elsewhere: 0.002 µε and 600 lbf/in),
+//! well below the 1 µε noise. Exactly at such a fold the cold start lands on the ghost of the
+//! branch that has just vanished (a relative law residual stuck at 3e-7 with a 2.4 lbf/in top
+//! point) and creeps off it for hundreds of iterations — past the cap at θ = 86.72995 in, which
+//! stopped a 200-replicate coverage study. A cold solve that hits the cap is therefore restarted
+//! from the cold solutions at `θ + 0.01`, `θ − 0.01`, `θ + 0.1`, `θ − 0.1` in
+//! (`RECOVERY_GAP_OFFSETS_IN`, first convergence wins; logged at `debug`): the same convergence
+//! test, a start that depends only on `(x, θ)`, 12 iterations in that case.
 //!
 //! No FE re-factorisation happens per evaluation: one evaluation costs a handful of Cholesky
 //! factorisations of size `2m` plus `O(N_u)` work.
