@@ -54,6 +54,10 @@ pub struct CoverageArgs {
     /// to the process variance (0: a zero-mean prior).
     #[arg(long, default_value_t = bamudi::params::DEFAULT_LEVEL_VARIANCE)]
     level_variance: f64,
+    /// Prior range of ρ, `LO,HI` (the sampling rule's `rho_range`; default `0,1.2`). A narrow
+    /// range around the truth's 0.8 tells how much of the θ error comes through ρ.
+    #[arg(long, value_delimiter = ',')]
+    rho_range: Option<Vec<f64>>,
     /// Worker threads (0: all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
@@ -115,6 +119,11 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
     o.mesh_element_size = a.mesh.or(o.mesh_element_size);
     o.scenarios = a.scenarios.clone().unwrap_or(o.scenarios);
     (o.threads, o.seed, o.discrepancy) = (a.threads, a.seed, a.discrepancy);
+    o.rho_range = match a.rho_range.as_deref() {
+        None => None,
+        Some(&[lo, hi]) => Some((lo, hi)),
+        Some(other) => bail!("--rho-range: expected LO,HI, got {other:?}"),
+    };
     o.marginal = bamudi::MarginalPrior {
         scales: serde_json::from_value(serde_json::Value::String(a.scales.clone())).with_context(
             || {
@@ -239,7 +248,7 @@ impl ReplicateLog {
     }
 }
 
-/// `-quick`, `-<estimator>`, `-<shape>`, `-prior-variant` as they apply.
+/// `-quick`, `-<estimator>`, `-<shape>`, `-prior-variant`, `-rho-range` as they apply.
 fn tag(a: &CoverageArgs, o: &CoverageOptions) -> String {
     let mut tag = if a.quick {
         "-quick".to_string()
@@ -256,6 +265,9 @@ fn tag(a: &CoverageArgs, o: &CoverageOptions) -> String {
     }
     if o.marginal != bamudi::MarginalPrior::default() {
         tag.push_str("-prior-variant");
+    }
+    if o.rho_range.is_some() {
+        tag.push_str("-rho-range");
     }
     tag
 }

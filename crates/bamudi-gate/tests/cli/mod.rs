@@ -232,14 +232,17 @@ fn simulate_calibrate_predict_round_trip_on_a_coarse_gate() {
         "posterior sd {sd} in: the data did not inform θ\n{stdout}"
     );
 
-    // the report states its inputs; a second run into the same --out is refused, and with
-    // --force replaces it whole (no stale file of the first run survives)
+    // the report states its inputs (and what ρ's spread is not); a second run into the same
+    // --out is refused, and with --force replaces it whole (no stale file of the first run
+    // survives)
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     for piece in [
         "## Inputs",
         "exps.csv",
         "U(81, 105) in",
         "element size 60 in",
+        // ρ's spread is shown with what the coverage study found, not as a bare interval
+        "Not an interval for a physical force scale",
     ] {
         assert!(
             report.contains(piece),

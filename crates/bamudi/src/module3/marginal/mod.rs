@@ -95,6 +95,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use rho::{ThetaTerms, truncated_moments};
 use serde::{Deserialize, Serialize};
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::RwLock;
 
@@ -584,14 +585,41 @@ where
         abs_tol: 1e-2,
         max_iters: 40,
     };
-    let (ln_c, _) = brent.minimise("marginal likelihood length scales", |v| at(v).map(|r| -r.2))?;
-    let (priors, cov, _) = at(ln_c)?;
+    // the best evaluation is kept, so the maximiser is not factored a second time (each
+    // evaluation costs the eigen-decompositions of the K_k and of WᵀW)
+    let best: RefCell<Option<Evaluated>> = RefCell::new(None);
+    let (ln_c, _) = brent.minimise("marginal likelihood length scales", |ln_c| {
+        let (priors, cov, log_lik) = at(ln_c)?;
+        let mut kept = best.borrow_mut();
+        if kept.as_ref().is_none_or(|b| log_lik > b.log_lik) {
+            *kept = Some(Evaluated {
+                ln_c,
+                priors,
+                cov,
+                log_lik,
+            });
+        }
+        Ok(-log_lik)
+    })?;
+    let (priors, cov) = match best.into_inner() {
+        Some(b) if b.ln_c.to_bits() == ln_c.to_bits() => (b.priors, b.cov),
+        _ => at(ln_c).map(|(pr, cov, _)| (pr, cov))?,
+    };
     Ok(Hyper {
         priors,
         length_factor: ln_c.exp(),
         cov: Some(cov),
         support: None,
     })
+}
+
+/// One evaluation of the length-scale search: the factor's logarithm, the priors and
+/// covariance it gives, and their log likelihood.
+struct Evaluated {
+    ln_c: f64,
+    priors: Vec<CoefficientPrior>,
+    cov: Covariance,
+    log_lik: f64,
 }
 
 /// `priors` with every length scale multiplied by `factor`.
