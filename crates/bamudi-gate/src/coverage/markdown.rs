@@ -133,9 +133,10 @@ impl CoverageReport {
             self.total_s,
         ));
         if let Some((lo, hi)) = o.rho_range {
+            let (d_lo, d_hi) = bamudi::SamplingRule::default().rho_range;
             s.push_str(&format!(
                 "ρ's prior (and the Module-2 sampling rule's ρ range) narrowed to U({lo}, {hi}); \
-                 the default is U(0, 1.2).\n\n"
+                 the default is U({d_lo}, {d_hi}).\n\n"
             ));
         }
         s.push_str(&format!(

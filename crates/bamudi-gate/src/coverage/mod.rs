@@ -209,6 +209,20 @@ pub struct LevelCoverage {
     pub acceptance: (usize, usize),
 }
 
+impl LevelCoverage {
+    /// A coverage count with its Clopper-Pearson 95 % interval and the acceptance region of
+    /// its nominal level ([`ACCEPTANCE_ALPHA`]).
+    fn of(c: &Coverage) -> Result<Self> {
+        Ok(Self {
+            level: c.level,
+            hits: c.hits,
+            rate: c.rate(),
+            interval: c.clopper_pearson(0.95)?,
+            acceptance: binomial_acceptance(c.n, c.level, ACCEPTANCE_ALPHA)?,
+        })
+    }
+}
+
 /// Normal and tangential values.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct NormalTangential {
@@ -302,20 +316,13 @@ fn rho_check(reps: &[Replicate]) -> Result<Option<RhoCheck>> {
     }
     let n = z.len();
     let hits = z.iter().filter(|v| v.abs() <= RHO_Z95).count();
-    let c = Coverage {
-        level: 0.95,
-        hits,
-        n,
-    };
     let mean = |f: &dyn Fn(f64) -> f64| z.iter().map(|&v| f(v)).sum::<f64>() / n as f64;
     Ok(Some(RhoCheck {
-        coverage_95: LevelCoverage {
+        coverage_95: LevelCoverage::of(&Coverage {
             level: 0.95,
             hits,
-            rate: c.rate(),
-            interval: c.clopper_pearson(0.95)?,
-            acceptance: binomial_acceptance(n, 0.95, ACCEPTANCE_ALPHA)?,
-        },
+            n,
+        })?,
         z_mean: mean(&|v| v),
         z_rms: mean(&|v| v * v).sqrt(),
         sd_median: median(reps.iter().filter_map(|r| r.rho_sd)),
@@ -609,16 +616,7 @@ fn summarise(
     let pits: Vec<f64> = reps.iter().map(|r| r.pit).collect();
     let levels = LEVELS
         .iter()
-        .map(|&level| {
-            let c = Coverage::from_pits(&pits, level);
-            Ok(LevelCoverage {
-                level,
-                hits: c.hits,
-                rate: c.rate(),
-                interval: c.clopper_pearson(0.95)?,
-                acceptance: binomial_acceptance(n, level, ACCEPTANCE_ALPHA)?,
-            })
-        })
+        .map(|&level| LevelCoverage::of(&Coverage::from_pits(&pits, level)))
         .collect::<Result<Vec<_>>>()?;
     let hist = RankHistogram::new(&pits, RANK_BINS)?;
     let mean = |f: &dyn Fn(&Replicate) -> f64| reps.iter().map(f).sum::<f64>() / n as f64;
