@@ -52,6 +52,12 @@ pub struct AdequacyArgs {
     /// `[calibration.marginal] level_variance`; unset, the library's default, 1e3).
     #[arg(long)]
     level_variance: Option<f64>,
+    /// Narrows `ρ`'s prior and the Module-2 sampling rule's `ρ` range to `LO,HI` (written to
+    /// every run's `cal.toml` as `[calibration.sampling] rho_range`; unset, the library's
+    /// default). A diagnostic, as `cargo xtask coverage --rho-range`: with `ρ` pinned near the
+    /// simulator's 0.8 it measures how much of a miss comes through `ρ`.
+    #[arg(long, value_delimiter = ',', value_name = "LO,HI")]
+    rho_range: Option<Vec<f64>>,
 }
 
 /// One deviation of the matrix.
@@ -142,6 +148,7 @@ fn scenario(s: u8) -> Result<(f64, (f64, f64))> {
 
 /// Runs the matrix and writes the report.
 pub fn run(a: &AdequacyArgs) -> Result<()> {
+    rho_pair(a)?; // a bad range is the command's error, not every run's
     let bin = build_cli()?;
     let work = PathBuf::from("target/adequacy");
     let mut runs = Vec::new();
@@ -189,8 +196,12 @@ pub fn run(a: &AdequacyArgs) -> Result<()> {
 }
 
 /// The runs' `bamudi calibrate --config` text: the gap prior `(lo, hi)` (in), the exact
-/// estimator, and the marginal prior's level variance when given.
-fn calibration_toml(prior: (f64, f64), level_variance: Option<f64>) -> String {
+/// estimator, and, when given, the marginal prior's level variance and `ρ`'s range.
+fn calibration_toml(
+    prior: (f64, f64),
+    level_variance: Option<f64>,
+    rho_range: Option<(f64, f64)>,
+) -> String {
     let mut cfg = format!(
         "gap_prior = [{}, {}]\n[calibration.estimator]\nkind = \"exact_linear\"\n",
         prior.0, prior.1
@@ -198,7 +209,23 @@ fn calibration_toml(prior: (f64, f64), level_variance: Option<f64>) -> String {
     if let Some(c) = level_variance {
         cfg.push_str(&format!("[calibration.marginal]\nlevel_variance = {c:e}\n"));
     }
+    if let Some((lo, hi)) = rho_range {
+        cfg.push_str(&format!(
+            "[calibration.sampling]\nrho_range = [{lo:?}, {hi:?}]\n"
+        ));
+    }
     cfg
+}
+
+/// `--rho-range` as a pair, checked: two finite values, `0 <= LO < HI`.
+fn rho_pair(a: &AdequacyArgs) -> Result<Option<(f64, f64)>> {
+    match a.rho_range.as_deref() {
+        None => Ok(None),
+        Some(&[lo, hi]) if lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi => {
+            Ok(Some((lo, hi)))
+        }
+        Some(v) => bail!("--rho-range: want LO,HI with 0 <= LO < HI, got {v:?}"),
+    }
 }
 
 /// Builds the release CLI and returns its path.
@@ -262,7 +289,10 @@ fn one_run(bin: &Path, work: &Path, a: &AdequacyArgs, c: &Cell, seed: u64, s: u8
         sim.extend(["--reality".to_string(), p("reality.toml")]);
     }
     cli(bin, &sim)?;
-    std::fs::write(p("cal.toml"), calibration_toml(prior, a.level_variance))?;
+    std::fs::write(
+        p("cal.toml"),
+        calibration_toml(prior, a.level_variance, rho_pair(a)?),
+    )?;
     let mut cal = common;
     cal.extend(
         [
@@ -399,7 +429,13 @@ fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
         a.mesh,
         a.seed,
         a.level_variance
-            .map_or(String::new(), |c| format!(" --level-variance {c:e}")),
+            .map_or(String::new(), |c| format!(" --level-variance {c:e}"))
+            + &a.rho_range.as_ref().map_or(String::new(), |r| {
+                format!(
+                    " --rho-range {}",
+                    r.iter().map(f64::to_string).collect::<Vec<_>>().join(",")
+                )
+            }),
         a.experiments
     );
     let mut keys: Vec<(String, u64)> = Vec::new();
@@ -464,10 +500,25 @@ mod tests {
             (Some(0.0), 0.0),
             (None, bamudi::params::DEFAULT_LEVEL_VARIANCE),
         ] {
-            let text = calibration_toml((81.0, 105.0), level);
+            let text = calibration_toml((81.0, 105.0), level, None);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
             assert_eq!(spec.calibration.marginal.level_variance, want, "{text}");
+        }
+    }
+
+    /// `--rho-range` reaches the sampling rule (and through it `ρ`'s prior) as written, next
+    /// to the level variance; unset, the library's default range stays.
+    #[test]
+    fn the_runs_configuration_carries_the_rho_range() {
+        for (range, want) in [
+            (Some((0.799, 0.801)), (0.799, 0.801)),
+            (None, bamudi::SamplingRule::default().rho_range),
+        ] {
+            let text = calibration_toml((81.0, 105.0), Some(1e3), range);
+            let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
+            assert_eq!(spec.calibration.sampling.rho_range, want, "{text}");
+            assert_eq!(spec.calibration.marginal.level_variance, 1e3, "{text}");
         }
     }
 }
