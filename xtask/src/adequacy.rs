@@ -1,9 +1,10 @@
 //! `cargo xtask adequacy`: the adequacy verdict over a matrix of realities (issue 16).
 //!
 //! Each run simulates experiments of a paper scenario with `bamudi simulate experiments
-//! --reality` (an as-built gate, or one gauge's sensor fault, at three magnitudes; or the
-//! drawing itself) and calibrates them with the drawing through `bamudi calibrate` (exact
-//! estimator, the CLI's default marginal mode) — exactly what a user runs. A run is a
+//! --reality` (an as-built gate, or one gauge's sensor fault, at three magnitudes — the
+//! as-built gates at any factors with `--as-built-magnitudes`; or the drawing itself) and
+//! calibrates them with the drawing through `bamudi calibrate` (exact estimator, the CLI's
+//! default marginal mode) — exactly what a user runs. A run is a
 //! **silent miss** when the gap's 95 % interval misses the truth and the verdict says
 //! "adequate"; it found the **right cause** when the verdict is "inadequate" and, for sensor
 //! cells, attributes every failure to a sensor with the verdict's sensor correction (the
@@ -58,6 +59,11 @@ pub struct AdequacyArgs {
     /// simulator's 0.8 it measures how much of a miss comes through `ρ`.
     #[arg(long, value_delimiter = ',', value_name = "LO,HI")]
     rho_range: Option<Vec<f64>>,
+    /// Factors on the drawing's value at which every as-built deviation is run, instead of
+    /// the matrix's three (e.g. `0.95,0.97,1.03,1.05` between and around them; each finite and
+    /// positive). The sensor cells keep theirs.
+    #[arg(long, value_delimiter = ',', value_name = "F,...")]
+    as_built_magnitudes: Option<Vec<f64>>,
 }
 
 /// One deviation of the matrix.
@@ -69,7 +75,10 @@ struct Cell {
     toml: String,
 }
 
-fn cells() -> Vec<Cell> {
+/// The matrix: three as-built deviations at three factors each (or at `as_built_magnitudes`),
+/// four sensor faults at three magnitudes each. The drawing's values are those of
+/// `GateConfig::default()` (checked by a test).
+fn cells(as_built_magnitudes: Option<&[f64]>) -> Vec<Cell> {
     let mut out = Vec::new();
     let as_built: [(&str, &str, f64, [f64; 3]); 3] = [
         (
@@ -92,7 +101,7 @@ fn cells() -> Vec<Cell> {
         ),
     ];
     for (name, key, base, mags) in as_built {
-        for m in mags {
+        for &m in as_built_magnitudes.unwrap_or(&mags) {
             out.push(Cell {
                 name: format!("as-built {name} x{m}"),
                 kind: "as_built",
@@ -149,6 +158,14 @@ fn scenario(s: u8) -> Result<(f64, (f64, f64))> {
 /// Runs the matrix and writes the report.
 pub fn run(a: &AdequacyArgs) -> Result<()> {
     rho_pair(a)?; // a bad range is the command's error, not every run's
+    if let Some(m) = a
+        .as_built_magnitudes
+        .iter()
+        .flatten()
+        .find(|m| !(m.is_finite() && **m > 0.0))
+    {
+        bail!("--as-built-magnitudes: {m} is not a finite positive factor");
+    }
     let bin = build_cli()?;
     let work = PathBuf::from("target/adequacy");
     let mut runs = Vec::new();
@@ -159,7 +176,7 @@ pub fn run(a: &AdequacyArgs) -> Result<()> {
         toml: String::new(),
     };
     let mut plan: Vec<(&Cell, u64)> = Vec::new();
-    let all = cells();
+    let all = cells(a.as_built_magnitudes.as_deref());
     for c in all
         .iter()
         .filter(|c| a.only.as_ref().is_none_or(|o| c.name.contains(o.as_str())))
@@ -411,6 +428,25 @@ fn clopper_pearson_upper(k: usize, n: usize) -> f64 {
     0.5 * (lo + hi)
 }
 
+/// The optional flags of the run, as the report's command line echoes them.
+fn optional_flags(a: &AdequacyArgs) -> String {
+    let list = |v: &[f64]| v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+    let mut s = String::new();
+    if let Some(o) = &a.only {
+        s.push_str(&format!(" --only '{o}'"));
+    }
+    if let Some(c) = a.level_variance {
+        s.push_str(&format!(" --level-variance {c:e}"));
+    }
+    if let Some(r) = &a.rho_range {
+        s.push_str(&format!(" --rho-range {}", list(r)));
+    }
+    if let Some(m) = &a.as_built_magnitudes {
+        s.push_str(&format!(" --as-built-magnitudes {}", list(m)));
+    }
+    s
+}
+
 fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
     let mut s = format!(
         "# The adequacy verdict on realities that differ from the model\n\n`cargo xtask adequacy --seeds {} --clean-seeds {} --scenarios {} --experiments {} --mesh {} --seed {}{}`: \
@@ -428,14 +464,7 @@ fn markdown(a: &AdequacyArgs, runs: &[Value]) -> String {
         a.experiments,
         a.mesh,
         a.seed,
-        a.level_variance
-            .map_or(String::new(), |c| format!(" --level-variance {c:e}"))
-            + &a.rho_range.as_ref().map_or(String::new(), |r| {
-                format!(
-                    " --rho-range {}",
-                    r.iter().map(f64::to_string).collect::<Vec<_>>().join(",")
-                )
-            }),
+        optional_flags(a),
         a.experiments
     );
     let mut keys: Vec<(String, u64)> = Vec::new();
@@ -504,6 +533,60 @@ mod tests {
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
             assert_eq!(spec.calibration.marginal.level_variance, want, "{text}");
+        }
+    }
+
+    /// The matrix's drawing values are the default gate's, and `--as-built-magnitudes` runs
+    /// every as-built deviation at exactly the given factors of them (the reality read back by
+    /// mitergate's own parser); the sensor cells do not change.
+    #[test]
+    fn as_built_magnitudes_scale_the_drawing_values() {
+        let drawing = mitergate::GateConfig::default();
+        let value = |g: &mitergate::GateConfig, c: &Cell| match c.name.as_str() {
+            n if n.contains("skin plate") => g.skin_plate.thickness,
+            n if n.contains("steel modulus") => g.material.youngs_modulus,
+            n if n.contains("girder web") => g.girders.web_thickness,
+            n => panic!("unknown as-built cell {n}"),
+        };
+        for (magnitudes, per_kind) in [(None, 3), (Some(&[0.95, 1.05][..]), 2)] {
+            let all = cells(magnitudes);
+            let as_built: Vec<&Cell> = all.iter().filter(|c| c.kind == "as_built").collect();
+            assert_eq!(as_built.len(), 3 * per_kind);
+            assert_eq!(all.iter().filter(|c| c.kind == "sensor").count(), 12);
+            for c in as_built {
+                let reality = mitergate::reality::Reality::from_toml_str(&c.toml).unwrap();
+                let truth = reality.truth_gate(&drawing).unwrap();
+                let factor = value(&truth, c) / value(&drawing, c);
+                let named: f64 = c.name.rsplit('x').next().unwrap().parse().unwrap();
+                // the factor is written as `base * m` in shortest round-trip form: equal to
+                // the named factor up to one rounding of the product
+                assert!(
+                    (factor - named).abs() < 1e-12,
+                    "{}: factor {factor}",
+                    c.name
+                );
+                if let Some(m) = magnitudes {
+                    assert!(m.contains(&named), "{}", c.name);
+                }
+            }
+        }
+    }
+
+    /// A factor that is not finite and positive is the command's error, named, before any
+    /// run (the check comes before the CLI is built).
+    #[test]
+    fn a_bad_as_built_magnitude_is_the_commands_error() {
+        #[derive(clap::Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            a: AdequacyArgs,
+        }
+        for bad in ["0.95,-1", "0", "NaN"] {
+            let cmd =
+                <Cmd as clap::Parser>::try_parse_from(["adequacy", "--as-built-magnitudes", bad])
+                    .unwrap();
+            let err = run(&cmd.a).unwrap_err().to_string();
+            assert!(err.contains("--as-built-magnitudes"), "{bad}: {err}");
         }
     }
 
