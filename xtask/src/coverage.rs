@@ -23,6 +23,11 @@ pub struct CoverageArgs {
     /// Replicates per scenario.
     #[arg(long)]
     replicates: Option<usize>,
+    /// Index of the first replicate (the study runs `N .. N + replicates`): split a long study
+    /// or resume a stopped one, then merge the parts with `--render A.json,B.json`. Exact
+    /// estimator only.
+    #[arg(long, default_value_t = 0)]
+    first_replicate: usize,
     /// Experiments per replicate.
     #[arg(long)]
     experiments: Option<usize>,
@@ -71,9 +76,12 @@ pub struct CoverageArgs {
     #[arg(long)]
     json: Option<PathBuf>,
     /// Re-render the markdown and plots of a saved `--json` report (no calibration runs); the
-    /// outputs are named by `--out` and the tag of the other flags, as for a fresh run.
-    #[arg(long)]
-    render: Option<PathBuf>,
+    /// outputs are named by `--out` and the tag of the other flags, as for a fresh run. Several
+    /// paths, comma separated, merge parts of one study (`--first-replicate` runs, or the
+    /// `.partial.jsonl` log of a stopped one, read under the first report's options) into one
+    /// report, written to `--json` if given.
+    #[arg(long, value_delimiter = ',')]
+    render: Option<Vec<PathBuf>>,
     /// Output directory of the markdown and the plots.
     #[arg(long, default_value = "docs/results")]
     out: PathBuf,
@@ -114,6 +122,7 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
         o.modes = modes.iter().map(|m| parse_mode(m)).collect::<Result<_>>()?;
     }
     o.n_replicates = a.replicates.unwrap_or(o.n_replicates);
+    o.first_replicate = a.first_replicate;
     o.n_experiments = a.experiments.unwrap_or(o.n_experiments);
     o.training_size = a.training_size.unwrap_or(o.training_size);
     o.mesh_element_size = a.mesh.or(o.mesh_element_size);
@@ -157,10 +166,12 @@ fn parse_mode(m: &str) -> Result<CoefficientMode> {
 pub fn run(a: &CoverageArgs) -> Result<()> {
     let opts = options(a)?;
     let report = match &a.render {
-        Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?
+        Some(paths) => {
+            let report = read_parts(paths)?;
+            if let (Some(path), true) = (&a.json, paths.len() > 1) {
+                bamudi::data::write_atomic(path, report.to_json()?.as_bytes())?;
+            }
+            report
         }
         None => study(&opts, a.json.as_deref())?,
     };
@@ -175,7 +186,7 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     if let (Some(path), None) = (&a.json, &a.render) {
         bamudi::data::write_atomic(path, report.to_json()?.as_bytes())?;
         // every finished replicate is in the report now: the running log has done its job
-        let log = ReplicateLog::path_for(path);
+        let log = LogWriter::path_for(path);
         if let Err(e) = std::fs::remove_file(&log)
             && e.kind() != std::io::ErrorKind::NotFound
         {
@@ -184,6 +195,35 @@ pub fn run(a: &CoverageArgs) -> Result<()> {
     }
     eprintln!("wrote {}", md_path.display());
     Ok(())
+}
+
+/// A saved report, or the merge of several parts of one study (reports and replicate logs).
+fn read_parts(paths: &[PathBuf]) -> Result<CoverageReport> {
+    let (mut reports, mut logs) = (Vec::new(), Vec::new());
+    for path in paths {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        if path.extension().is_some_and(|e| e == "jsonl") {
+            let log = coverage::ReplicateLog::parse(&text, &path.display().to_string())?;
+            if log.truncated {
+                eprintln!(
+                    "warning: {}: the last line is cut off (a study stopped while writing it) \
+                     and is left out",
+                    path.display()
+                );
+            }
+            logs.push(log);
+        } else {
+            reports.push(
+                serde_json::from_str::<CoverageReport>(&text)
+                    .with_context(|| format!("parsing {}", path.display()))?,
+            );
+        }
+    }
+    if paths.len() == 1 && logs.is_empty() {
+        return reports.pop().context("no report read");
+    }
+    Ok(CoverageReport::merge(&reports, logs)?)
 }
 
 fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> {
@@ -197,7 +237,7 @@ fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> 
     if let Ok(style) = ProgressStyle::with_template("replicates [{bar:40}] {pos}/{len} ({eta})") {
         bar.set_style(style);
     }
-    let log = json.map(ReplicateLog::create).transpose()?;
+    let log = json.map(|j| LogWriter::create(j, opts)).transpose()?;
     let report = coverage::run(opts, &|number, reps| {
         bar.inc(1);
         if let Some(log) = &log {
@@ -208,13 +248,14 @@ fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> 
     Ok(report)
 }
 
-/// `PATH.partial.jsonl`: one line per finished replicate, flushed as it comes.
-struct ReplicateLog {
+/// `PATH.partial.jsonl`: the study's options, then one line per finished replicate, flushed
+/// as it comes ([`coverage::ReplicateLog`] reads it back).
+struct LogWriter {
     path: PathBuf,
     file: std::sync::Mutex<std::fs::File>,
 }
 
-impl ReplicateLog {
+impl LogWriter {
     /// `PATH.partial.jsonl` for the report's `PATH`.
     fn path_for(json: &Path) -> PathBuf {
         let mut name = json.as_os_str().to_owned();
@@ -222,10 +263,22 @@ impl ReplicateLog {
         PathBuf::from(name)
     }
 
-    fn create(json: &Path) -> Result<Self> {
+    /// Refuses to overwrite a log: it may be the only record of a stopped study.
+    fn create(json: &Path, opts: &CoverageOptions) -> Result<Self> {
+        use std::io::Write;
         let path = Self::path_for(json);
-        let file = std::fs::File::create(&path)
-            .with_context(|| format!("creating the replicate log {}", path.display()))?;
+        let mut file = std::fs::File::create_new(&path).with_context(|| {
+            format!(
+                "creating the replicate log {} (an existing log may hold a stopped study's \
+                 replicates: merge it with --render, then move it away)",
+                path.display()
+            )
+        })?;
+        let header = coverage::LogHeader {
+            options: opts.clone(),
+        };
+        writeln!(file, "{}", serde_json::to_string(&header)?)
+            .with_context(|| format!("writing {}", path.display()))?;
         eprintln!("finished replicates go to {}", path.display());
         Ok(Self {
             path,
@@ -237,7 +290,20 @@ impl ReplicateLog {
     /// a convenience, the final report is written at the end either way.
     fn append(&self, scenario: u8, reps: &[coverage::Replicate]) {
         use std::io::Write;
-        let line = serde_json::json!({ "scenario": scenario, "modes": reps });
+        let line = coverage::LoggedReplicate {
+            scenario,
+            modes: reps.to_vec(),
+        };
+        let line = match serde_json::to_string(&line) {
+            Ok(l) => l,
+            Err(e) => {
+                eprintln!(
+                    "warning: could not encode a replicate for {}: {e}",
+                    self.path.display()
+                );
+                return;
+            }
+        };
         let mut file = match self.file.lock() {
             Ok(f) => f,
             Err(poisoned) => poisoned.into_inner(),

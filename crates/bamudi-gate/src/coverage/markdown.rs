@@ -103,6 +103,38 @@ fn rho_section(scenarios: &[ScenarioCoverage]) -> String {
 }
 
 impl CoverageReport {
+    /// Which replicates the report holds, when that is not simply `0 .. n` of one run.
+    fn provenance(&self) -> String {
+        let mut out = String::new();
+        if self.merged_from > 0 {
+            out.push_str(&format!(
+                "Merged from {} parts (reports and replicate logs of one study, \
+                 `cargo xtask coverage --render`); the wall time is the merged reports' sum, the \
+                 logs' replicates count only in the seconds per replicate.\n\n",
+                self.merged_from
+            ));
+        }
+        let o = &self.options;
+        let whole = |s: &ScenarioCoverage| {
+            s.replicates
+                .iter()
+                .enumerate()
+                .all(|(k, r)| r.index == o.first_replicate + k)
+                && s.n_replicates == o.n_replicates
+        };
+        if o.first_replicate > 0 || !self.scenarios.iter().all(whole) {
+            out.push_str("Replicate indices: ");
+            let ranges: Vec<String> = self
+                .scenarios
+                .iter()
+                .map(|s| format!("{} {}", s.name, index_ranges(&s.replicates)))
+                .collect();
+            out.push_str(&ranges.join("; "));
+            out.push_str(".\n\n");
+        }
+        out
+    }
+
     /// The markdown report: coverage table, prediction table, rank histograms.
     pub fn markdown(&self) -> String {
         let o = &self.options;
@@ -132,6 +164,7 @@ impl CoverageReport {
             o.seed,
             self.total_s,
         ));
+        s.push_str(&self.provenance());
         if let Some((lo, hi)) = o.rho_range {
             let (d_lo, d_hi) = bamudi::SamplingRule::default().rho_range;
             s.push_str(&format!(
@@ -176,4 +209,26 @@ impl CoverageReport {
         }
         s
     }
+}
+
+/// `0-21, 50-66` for the replicates' indices (sorted).
+fn index_ranges(reps: &[super::Replicate]) -> String {
+    let mut ranges: Vec<(usize, usize)> = Vec::new();
+    for r in reps {
+        match ranges.last_mut() {
+            Some((_, hi)) if r.index == *hi + 1 => *hi = r.index,
+            _ => ranges.push((r.index, r.index)),
+        }
+    }
+    ranges
+        .iter()
+        .map(|&(lo, hi)| {
+            if lo == hi {
+                lo.to_string()
+            } else {
+                format!("{lo}-{hi}")
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }

@@ -21,9 +21,11 @@
 //! binomial acceptance region of its nominal level.
 
 mod markdown;
+mod merge;
 mod truth;
 
 pub use markdown::mode_label;
+pub use merge::{LogHeader, LoggedReplicate, ReplicateLog};
 pub use truth::{DiscrepancyShape, Truth};
 
 use crate::error::{GateAppError, Result};
@@ -66,6 +68,12 @@ pub struct CoverageOptions {
     pub modes: Vec<CoefficientMode>,
     /// Replicate data sets per scenario.
     pub n_replicates: usize,
+    /// Index of the first replicate: the study runs replicates `first_replicate ..
+    /// first_replicate + n_replicates`, each with the data its index draws, so a long study can
+    /// be split over machines or resumed and its parts merged (`0` for a whole study). With a
+    /// learnt estimator it must be `0`: replicate 0 trains the estimator the others reuse.
+    #[serde(default)]
+    pub first_replicate: usize,
     /// Experiments per data set (paper: 500).
     pub n_experiments: usize,
     /// Module-2 training-set size (learnt estimators only).
@@ -106,6 +114,7 @@ impl CoverageOptions {
                 CoefficientMode::PriorMarginal,
             ],
             n_replicates: 100,
+            first_replicate: 0,
             n_experiments: 500,
             training_size: 4_000,
             estimator: EstimatorParams::ExactLinear,
@@ -140,6 +149,12 @@ impl CoverageOptions {
             |key: &str, why: &str| Err(GateAppError::Option(format!("coverage {key}: {why}")));
         if self.n_replicates < 2 {
             return bad("replicates", "at least 2");
+        }
+        if self.first_replicate > 0 && self.estimator != EstimatorParams::ExactLinear {
+            return bad(
+                "first replicate",
+                "must be 0 with a learnt estimator (replicate 0 trains the one the others reuse)",
+            );
         }
         if self.modes.is_empty() || self.scenarios.is_empty() {
             return bad("modes/scenarios", "at least one of each");
@@ -344,8 +359,13 @@ pub struct CoverageReport {
     pub element_size: f64,
     /// Per scenario and mode.
     pub scenarios: Vec<ScenarioCoverage>,
-    /// Wall time (s).
+    /// Wall time (s); for a merged report, the sum of the merged reports' (a replicate log
+    /// records each replicate's seconds, not the study's wall time).
     pub total_s: f64,
+    /// Parts (reports and replicate logs) this report was merged from; `0` for a study run
+    /// in one go.
+    #[serde(default)]
+    pub merged_from: usize,
 }
 
 /// Called after each replicate, from worker threads, with the scenario number and the
@@ -376,6 +396,7 @@ pub fn run(opts: &CoverageOptions, on_replicate: OnReplicate) -> Result<Coverage
         element_size: gate.element_size,
         scenarios,
         total_s: t.elapsed().as_secs_f64(),
+        merged_from: 0,
     })
 }
 
@@ -402,10 +423,11 @@ fn scenario_replicates(
         opts,
     };
     // the first replicate fits the estimator the others reuse
-    let (first, estimator) = setup.replicate(0, None)?;
+    let start = opts.first_replicate;
+    let (first, estimator) = setup.replicate(start, None)?;
     on_replicate(number, &first);
     let mut all = vec![first];
-    let rest = (1..opts.n_replicates)
+    let rest = (start + 1..start + opts.n_replicates)
         .into_par_iter()
         .map(|r| {
             let reps = setup.replicate(r, Some(&estimator))?.0;
@@ -745,6 +767,23 @@ mod tests {
             band_halfwidth: None,
             seconds: 0.0,
         }
+    }
+
+    /// A study may start at any replicate with the exact estimator, whose fit does not depend
+    /// on the replicate, but not with a learnt one, which replicate 0 trains for the others.
+    #[test]
+    fn a_later_first_replicate_needs_the_exact_estimator() {
+        let later = CoverageOptions {
+            first_replicate: 22,
+            ..CoverageOptions::quick()
+        };
+        assert!(later.check().is_ok());
+        let learnt = CoverageOptions {
+            estimator: EstimatorParams::Ridge(bamudi::RidgeParams { lambda: 1e-3 }),
+            ..later
+        };
+        let msg = learnt.check().unwrap_err().to_string();
+        assert!(msg.contains("first replicate"), "{msg}");
     }
 
     /// Twenty replicates whose `(ρ − 0.8)/sd` are known: the check counts those within

@@ -1,5 +1,6 @@
 //! The marginal covariance `V = s W Wᵀ + σ² I` of the observations: its low-rank factor `W`
-//! and the spectrum of `WᵀW` that serves every amplitude `s` and noise `σ²`.
+//! and the spectrum of `WᵀW` (or of `W Wᵀ`, whichever is smaller) that serves every amplitude
+//! `s` and noise `σ²`.
 
 use super::CoefficientPrior;
 use crate::error::{BamudiError, Result};
@@ -22,7 +23,6 @@ pub struct LowRank {
     factors: Vec<DMatrix<f64>>,
     offsets: Vec<usize>,
     b: DMatrix<f64>,
-    wtw: DMatrix<f64>,
 }
 
 impl LowRank {
@@ -69,12 +69,10 @@ impl LowRank {
         for f in &factors {
             offsets.push(offsets.last().copied().unwrap_or(0) + f.ncols());
         }
-        let wtw = gram(&factors, b, &offsets);
         Ok(Self {
             factors,
             offsets,
             b: b.clone(),
-            wtw,
         })
     }
 
@@ -84,7 +82,6 @@ impl LowRank {
             factors: self.factors.clone(),
             offsets: self.offsets.clone(),
             b: b.clone(),
-            wtw: gram(&self.factors, b, &self.offsets),
         }
     }
 
@@ -155,6 +152,41 @@ impl LowRank {
     }
 }
 
+impl LowRank {
+    /// `W Wᵀ = Σ_k (F_k F_kᵀ) ⊗ (b_k b_kᵀ)` (`N_s x N_s`), the prior covariance of the
+    /// observations at unit amplitude.
+    fn outer(&self) -> DMatrix<f64> {
+        let (n_e, n_o) = (self.factors[0].nrows(), self.b.nrows());
+        let mut out = DMatrix::zeros(n_e * n_o, n_e * n_o);
+        for (k, f) in self.factors.iter().enumerate() {
+            let kk = f * f.transpose();
+            let bk = self.b.column(k);
+            for j in 0..n_e {
+                for q in 0..n_o {
+                    let mut col = out.column_mut(j * n_o + q);
+                    let bq = bk[q];
+                    for i in 0..n_e {
+                        let kij = kk[(i, j)] * bq;
+                        for p in 0..n_o {
+                            col[i * n_o + p] += kij * bk[p];
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The observations whose `Wᵀ` projection is [`project_cross`](Self::project_cross):
+    /// column `c` is `cmat[:, c] ⊗ b_c` (`N_s x K`).
+    fn cross_observations(&self, cmat: &DMatrix<f64>) -> DMatrix<f64> {
+        let n_o = self.b.nrows();
+        DMatrix::from_fn(cmat.nrows() * n_o, cmat.ncols(), |r, c| {
+            cmat[(r / n_o, c)] * self.b[(r % n_o, c)]
+        })
+    }
+}
+
 /// The kept eigen-pairs of a symmetric positive semi-definite `k` as `U Λ^{1/2}`.
 fn eigen_factor(k: &DMatrix<f64>, tol: f64) -> Result<DMatrix<f64>> {
     let eig = SymmetricEigen::new(k, "coefficient prior kernel matrix")?;
@@ -200,32 +232,118 @@ fn gram(factors: &[DMatrix<f64>], b: &DMatrix<f64>, offsets: &[usize]) -> DMatri
     out
 }
 
-/// `WᵀW = Q Λ Qᵀ`: with it, for `V = s W Wᵀ + σ² I` and `t = s/σ²`,
+/// The spectrum of `W`: `WᵀW = Q Λ Qᵀ`, equivalently `W Wᵀ = P Λ Pᵀ` with `W Q = P Λ^{1/2}`
+/// on the non-zero eigenvalues. With it, for `V = s W Wᵀ + σ² I` and `t = s/σ²`,
 /// `V⁻¹ = σ⁻² (I − t W Q (I + tΛ)⁻¹ Qᵀ Wᵀ)` and `ln|V| = N_s ln σ² + Σ ln(1 + tλ)` for every
 /// `s` and `σ²` at the cost of one decomposition (Woodbury's identity).
+///
+/// Observations enter only through their projections `Qᵀ Wᵀ v` ([`project`](Self::project)),
+/// so the decomposition is of whichever Gram matrix is smaller: `WᵀW` (`R x R`) when the rank
+/// `R` is at most the number of observations `N_s`, otherwise `W Wᵀ` (`N_s x N_s`, where
+/// `Qᵀ Wᵀ v = Λ^{1/2} Pᵀ v`). A rough Matérn prior on 500 experiments keeps several hundred
+/// directions per coefficient, so `R` can exceed `N_s` and the decomposition, cubic in its
+/// size, then costs `(R/N_s)³` times more in the primal form.
+///
+/// ```
+/// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+/// use nalgebra::DMatrix;
+/// // one rough coefficient function at 8 experiments seen by one gauge: W has 8 + 1 (level)
+/// // columns against 8 observations, so the spectrum is of W Wᵀ
+/// let x = DMatrix::from_fn(8, 1, |i, _| i as f64);
+/// let prior = CoefficientPrior {
+///     kernel: gp::Kernel::Matern52 { ard: false },
+///     length_scales: vec![0.5],
+///     level_variance: 1.0,
+/// };
+/// let (amps, b) = (DMatrix::from_element(8, 1, 2.0), DMatrix::from_element(1, 1, 1.0));
+/// let lr = LowRank::new(&[prior.clone()], &x, &amps, &b).unwrap();
+/// let spectrum = Spectrum::new(&lr).unwrap();
+/// // V = s W Wᵀ + σ² I with s = 1, σ² = 0.5 (t = s/σ² = 2): V (V⁻¹ v) = v
+/// let v = DMatrix::from_fn(8, 1, |i, _| (i as f64).sin());
+/// let inv_v = spectrum.inv_apply(&lr, &v, 2.0, 0.5);
+/// // amplitude² times the prior's covariance (correlation + level), plus the noise
+/// let dense = prior.matrix(&x, &x) * 4.0 + DMatrix::identity(8, 8) * 0.5;
+/// assert!((&dense * inv_v - &v).amax() < 1e-6);
+/// ```
 #[derive(Debug, Clone)]
 pub struct Spectrum {
-    q: DMatrix<f64>,
-    /// `Qᵀ`, kept so that [`Spectrum::rotate`] is one blocked product (nalgebra's `tr_mul`
-    /// takes a dot product per entry and streams `Q` once per column of its argument).
-    qt: DMatrix<f64>,
+    basis: Basis,
     lambda: DVector<f64>,
 }
 
+/// The eigenvectors of [`Spectrum`] in the form that was decomposed.
+#[derive(Debug, Clone)]
+enum Basis {
+    /// `Q` and `Qᵀ` of `WᵀW` (`R x R`). `Qᵀ` is kept so that the projection is one blocked
+    /// product (nalgebra's `tr_mul` takes a dot product per entry and streams `Q` once per
+    /// column of its argument).
+    Primal { q: DMatrix<f64>, qt: DMatrix<f64> },
+    /// `W Q = P Λ^{1/2}` and its transpose (`N_s x N_s`), from `W Wᵀ = P Λ Pᵀ`.
+    Dual { wq: DMatrix<f64>, wqt: DMatrix<f64> },
+}
+
 impl Spectrum {
-    /// Decomposes `WᵀW` of `lr`.
+    /// Decomposes the smaller of `WᵀW` and `W Wᵀ` of `lr`.
     pub fn new(lr: &LowRank) -> Result<Self> {
-        let eig = SymmetricEigen::new(&lr.wtw, "WᵀW of the marginal covariance")?;
+        if lr.rank() > lr.n_obs() {
+            Self::dual(lr)
+        } else {
+            Self::primal(lr)
+        }
+    }
+
+    /// From `WᵀW = Q Λ Qᵀ` whatever the rank (the tests compare the two forms).
+    pub(super) fn primal(lr: &LowRank) -> Result<Self> {
+        let wtw = gram(&lr.factors, &lr.b, &lr.offsets);
+        let eig = SymmetricEigen::new(&wtw, "WᵀW of the marginal covariance")?;
         Ok(Self {
             lambda: eig.values.map(|v| v.max(0.0)),
-            qt: eig.vectors.transpose(),
-            q: eig.vectors,
+            basis: Basis::Primal {
+                qt: eig.vectors.transpose(),
+                q: eig.vectors,
+            },
         })
     }
 
-    /// `Qᵀ z`.
-    pub fn rotate(&self, z: &DMatrix<f64>) -> DMatrix<f64> {
-        &self.qt * z
+    /// From `W Wᵀ = P Λ Pᵀ`.
+    fn dual(lr: &LowRank) -> Result<Self> {
+        let eig = SymmetricEigen::new(&lr.outer(), "W Wᵀ of the marginal covariance")?;
+        let lambda = eig.values.map(|v| v.max(0.0));
+        let mut wq = eig.vectors;
+        for (mut col, l) in wq.column_iter_mut().zip(lambda.iter()) {
+            col *= l.sqrt();
+        }
+        Ok(Self {
+            lambda,
+            basis: Basis::Dual {
+                wqt: wq.transpose(),
+                wq,
+            },
+        })
+    }
+
+    /// `Qᵀ Wᵀ v` for the columns of `v` (`N_s x c`).
+    pub fn project(&self, lr: &LowRank, v: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.basis {
+            Basis::Primal { qt, .. } => qt * lr.wt(v),
+            Basis::Dual { wqt, .. } => wqt * v,
+        }
+    }
+
+    /// `Qᵀ` times [`LowRank::project_cross`] of `cmat`.
+    pub fn project_cross(&self, lr: &LowRank, cmat: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.basis {
+            Basis::Primal { qt, .. } => qt * lr.project_cross(cmat),
+            Basis::Dual { wqt, .. } => wqt * lr.cross_observations(cmat),
+        }
+    }
+
+    /// `W Q z` for the columns of `z`.
+    fn expand(&self, lr: &LowRank, z: &DMatrix<f64>) -> DMatrix<f64> {
+        match &self.basis {
+            Basis::Primal { q, .. } => lr.w(&(q * z)),
+            Basis::Dual { wq, .. } => wq * z,
+        }
     }
 
     /// `ln |V|` for `N_s` observations.
@@ -233,20 +351,30 @@ impl Spectrum {
         n_obs as f64 * sigma2.ln() + self.lambda.iter().map(|l| (t * l).ln_1p()).sum::<f64>()
     }
 
-    /// `Q (I + tΛ)^{-1/2}` (`R x R`): with it `Z = W Q (I + tΛ)^{-1/2}` gives
-    /// `V⁻¹ = σ⁻² (I − t Z Zᵀ)`, whose blocks are cheap.
-    pub fn scaled_basis(&self, t: f64) -> DMatrix<f64> {
-        DMatrix::from_fn(self.q.nrows(), self.q.ncols(), |i, j| {
-            self.q[(i, j)] / (1.0 + t * self.lambda[j]).sqrt()
-        })
+    /// `Z = W Q (I + tΛ)^{-1/2}` (`N_s` rows): `V⁻¹ = σ⁻² (I − t Z Zᵀ)`, whose blocks are
+    /// cheap.
+    pub fn whitened_factor(&self, lr: &LowRank, t: f64) -> DMatrix<f64> {
+        let scale = self.lambda.map(|l| 1.0 / (1.0 + t * l).sqrt());
+        match &self.basis {
+            Basis::Primal { q, .. } => lr.w(&DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| {
+                q[(i, j)] * scale[j]
+            })),
+            Basis::Dual { wq, .. } => {
+                DMatrix::from_fn(wq.nrows(), wq.ncols(), |i, j| wq[(i, j)] * scale[j])
+            }
+        }
     }
 
-    /// `(Qᵀa)ᵀ (I + tΛ)⁻¹ (Qᵀb)` from rotated `qa`, `qb`.
+    /// `(Qᵀa)ᵀ (I + tΛ)⁻¹ (Qᵀb)` from projected `qa`, `qb`.
     pub fn core(&self, qa: &DMatrix<f64>, qb: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
-        let scaled = DMatrix::from_fn(qb.nrows(), qb.ncols(), |i, j| {
-            qb[(i, j)] / (1.0 + t * self.lambda[i])
-        });
-        qa.tr_mul(&scaled)
+        qa.tr_mul(&self.shrink(qb, t))
+    }
+
+    /// `(I + tΛ)⁻¹ z`.
+    fn shrink(&self, z: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(z.nrows(), z.ncols(), |i, j| {
+            z[(i, j)] / (1.0 + t * self.lambda[i])
+        })
     }
 
     /// The Gram matrix `Uᵀ V⁻¹ U` from `qwu = Qᵀ Wᵀ U` and `uu = UᵀU`.
@@ -256,10 +384,7 @@ impl Spectrum {
 
     /// `V⁻¹ v` for the columns of `v`.
     pub fn inv_apply(&self, lr: &LowRank, v: &DMatrix<f64>, t: f64, sigma2: f64) -> DMatrix<f64> {
-        let qwv = self.rotate(&lr.wt(v));
-        let scaled = DMatrix::from_fn(qwv.nrows(), qwv.ncols(), |i, j| {
-            qwv[(i, j)] / (1.0 + t * self.lambda[i])
-        });
-        (v - lr.w(&(&self.q * scaled)) * t) / sigma2
+        let shrunk = self.shrink(&self.project(lr, v), t);
+        (v - self.expand(lr, &shrunk) * t) / sigma2
     }
 }

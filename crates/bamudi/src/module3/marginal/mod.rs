@@ -77,8 +77,9 @@
 //! # Computation
 //!
 //! Each `K_k` (`N_e x N_e`) is replaced by its eigen-expansion without the eigenvalues below
-//! `1e-9` of the largest ([`lowrank::LowRank`]), and `WᵀW` (`R x R`) is decomposed once per
-//! factor ([`lowrank::Spectrum`]): every `s`, `σ²` and `θ` then costs matrix-vector work.
+//! `1e-7` of the largest ([`lowrank::LowRank`]), and `WᵀW` (`R x R`) or, when the rank `R`
+//! exceeds the observations `N_s`, `W Wᵀ` (`N_s x N_s`) is decomposed once per factor
+//! ([`lowrank::Spectrum`]): every `s`, `σ²` and `θ` then costs matrix-vector work.
 
 mod lowrank;
 mod rho;
@@ -279,9 +280,9 @@ impl Covariance {
         self.sigma2
     }
 
-    /// `Z = W Q (I + tΛ)^{-1/2}` (`N_s x R`): `V⁻¹ = σ⁻² (I − t Z Zᵀ)`.
+    /// `Z = W Q (I + tΛ)^{-1/2}` (`N_s` rows): `V⁻¹ = σ⁻² (I − t Z Zᵀ)`.
     pub(crate) fn whitened_factor(&self) -> DMatrix<f64> {
-        self.lr.w(&self.spectrum.scaled_basis(self.t()))
+        self.spectrum.whitened_factor(&self.lr, self.t())
     }
 
     fn log_det(&self) -> f64 {
@@ -291,7 +292,7 @@ impl Covariance {
 
     /// `[a c]ᵀ V⁻¹ [a c]` and the `ρ`-integrated terms.
     fn terms(&self, st: &Stacked, rho: (f64, f64)) -> ThetaTerms {
-        let qw = self.spectrum.rotate(&self.lr.wt(&st.ac));
+        let qw = self.spectrum.project(&self.lr, &st.ac);
         let g = self
             .spectrum
             .gram(&qw, &st.ac.tr_mul(&st.ac), self.t(), self.sigma2);
@@ -592,7 +593,7 @@ where
         max_iters: 40,
     };
     // the best evaluation is kept, so the maximiser is not factored a second time (each
-    // evaluation costs the eigen-decompositions of the K_k and of WᵀW)
+    // evaluation costs the eigen-decompositions of the K_k and of WᵀW or W Wᵀ)
     let best: RefCell<Option<Evaluated>> = RefCell::new(None);
     let (ln_c, _) = brent.minimise("marginal likelihood length scales", |ln_c| {
         let (priors, cov, log_lik) = at(ln_c)?;
@@ -640,7 +641,7 @@ fn scale_lengths(priors: &[CoefficientPrior], factor: f64) -> Vec<CoefficientPri
 }
 
 /// Amplitude `s` and noise variance `σ²` maximising the likelihood for the factor `lr` and
-/// the rows `st` (one decomposition of `WᵀW` serves the whole search); `σ` held when
+/// the rows `st` (one [`Spectrum`] serves the whole search); `σ` held when
 /// configured, otherwise at its closed-form maximiser for each `t = s/σ²` (the `ρ` prior's
 /// truncation aside). Returns the covariance and its log likelihood.
 fn fit_scales(
@@ -651,7 +652,7 @@ fn fit_scales(
     sigma2_start: f64,
 ) -> Result<(Covariance, f64)> {
     let spectrum = Spectrum::new(&lr)?;
-    let qw = spectrum.rotate(&lr.wt(&st.ac));
+    let qw = spectrum.project(&lr, &st.ac);
     let acac = st.ac.tr_mul(&st.ac);
     let n_s = lr.n_obs();
     let ll_at = |t: f64, sigma2: f64| -> f64 {
@@ -800,6 +801,72 @@ mod tests {
             "{} vs {dense}",
             cov.log_det()
         );
+    }
+
+    /// The dual form (`W Wᵀ`, chosen when the rank exceeds the observations) and the primal
+    /// form (`WᵀW`) of one factor give the same solves, log determinant, projections and
+    /// whitened factor: the marginal mode's numbers do not depend on which was decomposed. The
+    /// factor here has rank up to 3 x (12 + 1 level) = 39 against 24 observations (12
+    /// experiments x 2 gauges), so `new` picks the dual.
+    #[test]
+    fn the_dual_spectrum_agrees_with_the_primal_one() {
+        let x = DMatrix::from_fn(12, 2, |i, j| {
+            if j == 0 {
+                i as f64 / 3.0
+            } else {
+                ((i * 5) % 12) as f64 / 4.0
+            }
+        });
+        let prior = CoefficientPrior {
+            kernel: gp::Kernel::Matern52 { ard: true },
+            length_scales: vec![0.4, 0.7],
+            level_variance: 0.5,
+        };
+        let b = DMatrix::from_row_slice(2, 3, &[1.0, 0.4, 0.2, -0.6, 1.3, 0.9]);
+        let amps = DMatrix::from_fn(12, 3, |i, k| 1.0 + 0.05 * (i * (k + 1)) as f64);
+        let priors = vec![prior; 3];
+        let lr = LowRank::with_tolerance(&priors, &x, &amps, &b, 1e-14).unwrap();
+        assert!(
+            lr.rank() > lr.n_obs(),
+            "rank {} of {}",
+            lr.rank(),
+            lr.n_obs()
+        );
+        let (dual, primal) = (Spectrum::new(&lr).unwrap(), Spectrum::primal(&lr).unwrap());
+        let (t, sigma2) = (2.3, 0.4);
+        let v = DMatrix::from_fn(24, 2, |i, j| ((i * 5 + j * 3) % 7) as f64 - 3.0);
+        let cmat = DMatrix::from_fn(12, 3, |i, k| 0.3 + 0.1 * ((i + 2 * k) % 5) as f64);
+        // every quantity is O(1)-O(100); both forms are exact up to the eigen-solver's rounding
+        // (about 1e-15 of the largest eigenvalue per direction, including the near-null
+        // directions of the larger Gram matrix), far below 1e-9 relative, while a wrong formula
+        // (a missing Λ^{1/2}, a transpose, a wrong stacking) changes them by O(1)
+        let close = |a: &DMatrix<f64>, b: &DMatrix<f64>, what: &str| {
+            let err = (a - b).amax();
+            assert!(err <= 1e-9 * b.amax().max(1.0), "{what}: {err:e}");
+        };
+        close(
+            &dual.inv_apply(&lr, &v, t, sigma2),
+            &primal.inv_apply(&lr, &v, t, sigma2),
+            "V⁻¹ v",
+        );
+        let gram = |s: &Spectrum| s.gram(&s.project(&lr, &v), &v.tr_mul(&v), t, sigma2);
+        close(&gram(&dual), &gram(&primal), "vᵀ V⁻¹ v");
+        // mixed with the observations' projection too: a sign error in one projection would
+        // cancel in a square
+        let cross = |s: &Spectrum| {
+            let z = s.project_cross(&lr, &cmat);
+            let mut both = s.core(&z, &z, t);
+            both.extend(s.core(&z, &s.project(&lr, &v), t).column_iter());
+            both
+        };
+        close(&cross(&dual), &cross(&primal), "cross covariances");
+        let zzt = |s: &Spectrum| {
+            let z = s.whitened_factor(&lr, t);
+            &z * z.transpose()
+        };
+        close(&zzt(&dual), &zzt(&primal), "Z Zᵀ");
+        let (ld, lp) = (dual.log_det(24, t, sigma2), primal.log_det(24, t, sigma2));
+        assert!((ld - lp).abs() < 1e-9 * lp.abs().max(1.0), "{ld} vs {lp}");
     }
 
     #[test]

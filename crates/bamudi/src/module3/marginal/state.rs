@@ -62,7 +62,7 @@ impl MarginalState {
         let cc = DMatrix::from_fn(k, k, |i, j| {
             cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
         });
-        let qz = cov.spectrum.rotate(&cov.lr.project_cross(cmat));
+        let qz = cov.spectrum.project_cross(&cov.lr, cmat);
         let q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
             true => ax[i] * ax[i] * fit.priors[i].cov(x, x),
