@@ -91,7 +91,7 @@ pub fn calibrate(
     let observer = Callback::new(progress);
     let (cal, model) = py
         .detach(|| {
-            let model = saved.multilevel(MEMO_CAPACITY)?;
+            let model = spec.calibration_model(&saved, MEMO_CAPACITY, &config_label)?;
             let exps = session::experiments_from_table(&table, &model)?;
             let cal = session::calibrate(&model, &exps, &config, &observer)?;
             Ok::<_, bamudi_gate::GateAppError>((cal, model))

@@ -64,6 +64,11 @@ pub struct AdequacyArgs {
     /// positive). The sensor cells keep theirs.
     #[arg(long, value_delimiter = ',', value_name = "F,...")]
     as_built_magnitudes: Option<Vec<f64>>,
+    /// Declared tolerances of the drawing, integrated out by every run's calibration
+    /// (`KEY=RELATIVE_SD`, e.g. `skin_plate.thickness=0.03`; written to `cal.toml` as
+    /// `[[tolerances]]`).
+    #[arg(long, value_delimiter = ',', value_name = "KEY=SD,...")]
+    tolerances: Vec<String>,
 }
 
 /// One deviation of the matrix.
@@ -158,6 +163,7 @@ fn scenario(s: u8) -> Result<(f64, (f64, f64))> {
 /// Runs the matrix and writes the report.
 pub fn run(a: &AdequacyArgs) -> Result<()> {
     rho_pair(a)?; // a bad range is the command's error, not every run's
+    tolerance_pairs(a)?;
     if let Some(m) = a
         .as_built_magnitudes
         .iter()
@@ -218,6 +224,7 @@ fn calibration_toml(
     prior: (f64, f64),
     level_variance: Option<f64>,
     rho_range: Option<(f64, f64)>,
+    tolerances: &[(String, f64)],
 ) -> String {
     let mut cfg = format!(
         "gap_prior = [{}, {}]\n[calibration.estimator]\nkind = \"exact_linear\"\n",
@@ -231,7 +238,26 @@ fn calibration_toml(
             "[calibration.sampling]\nrho_range = [{lo:?}, {hi:?}]\n"
         ));
     }
+    for (key, sd) in tolerances {
+        cfg.push_str(&format!(
+            "[[tolerances]]\nkey = \"{key}\"\nrelative_sd = {sd:?}\n"
+        ));
+    }
     cfg
+}
+
+/// `--tolerances` as (key, relative sd) pairs, checked: `KEY=SD` with `SD` a number.
+fn tolerance_pairs(a: &AdequacyArgs) -> Result<Vec<(String, f64)>> {
+    a.tolerances
+        .iter()
+        .map(|t| match t.split_once('=') {
+            Some((k, v)) if !k.is_empty() => v
+                .parse::<f64>()
+                .map(|sd| (k.to_string(), sd))
+                .with_context(|| format!("--tolerances {t}: `{v}` is not a number")),
+            _ => bail!("--tolerances {t}: want KEY=RELATIVE_SD"),
+        })
+        .collect()
 }
 
 /// `--rho-range` as a pair, checked: two finite values, `0 <= LO < HI`.
@@ -308,7 +334,7 @@ fn one_run(bin: &Path, work: &Path, a: &AdequacyArgs, c: &Cell, seed: u64, s: u8
     cli(bin, &sim)?;
     std::fs::write(
         p("cal.toml"),
-        calibration_toml(prior, a.level_variance, rho_pair(a)?),
+        calibration_toml(prior, a.level_variance, rho_pair(a)?, &tolerance_pairs(a)?),
     )?;
     let mut cal = common;
     cal.extend(
@@ -377,6 +403,7 @@ fn judge(c: &Cell, seed: u64, s: u8, truth: f64, r: &Value) -> Value {
         "mean": t["mean"][0], "sd": t["sd"][0], "ci95": [lo, hi], "covered": covered,
         "verdict": verdict, "right_cause": right, "silent_miss": !covered && verdict == "adequate",
         "failed": failed.iter().map(|(g, a, c)| json!({"check": c, "gauges": g, "attribution": a})).collect::<Vec<_>>(),
+        "tolerances": r["tolerances"].clone(),
     })
 }
 
@@ -443,6 +470,9 @@ fn optional_flags(a: &AdequacyArgs) -> String {
     }
     if let Some(m) = &a.as_built_magnitudes {
         s.push_str(&format!(" --as-built-magnitudes {}", list(m)));
+    }
+    if !a.tolerances.is_empty() {
+        s.push_str(&format!(" --tolerances {}", a.tolerances.join(",")));
     }
     s
 }
@@ -529,7 +559,7 @@ mod tests {
             (Some(0.0), 0.0),
             (None, bamudi::params::DEFAULT_LEVEL_VARIANCE),
         ] {
-            let text = calibration_toml((81.0, 105.0), level, None);
+            let text = calibration_toml((81.0, 105.0), level, None, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
             assert_eq!(spec.calibration.marginal.level_variance, want, "{text}");
@@ -598,10 +628,49 @@ mod tests {
             (Some((0.799, 0.801)), (0.799, 0.801)),
             (None, bamudi::SamplingRule::default().rho_range),
         ] {
-            let text = calibration_toml((81.0, 105.0), Some(1e3), range);
+            let text = calibration_toml((81.0, 105.0), Some(1e3), range, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.calibration.sampling.rho_range, want, "{text}");
             assert_eq!(spec.calibration.marginal.level_variance, 1e3, "{text}");
+        }
+    }
+
+    /// `--tolerances` reaches every run's configuration as `[[tolerances]]`, read back by the
+    /// CLI's own parser; a malformed pair is the command's error, named.
+    #[test]
+    fn the_runs_configuration_carries_the_tolerances() {
+        #[derive(clap::Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            a: AdequacyArgs,
+        }
+        let parse = |v: &str| {
+            <Cmd as clap::Parser>::try_parse_from(["adequacy", "--tolerances", v])
+                .unwrap()
+                .a
+        };
+        let pairs = tolerance_pairs(&parse(
+            "skin_plate.thickness=0.03,material.youngs_modulus=0.02",
+        ))
+        .unwrap();
+        let text = calibration_toml((81.0, 105.0), None, None, &pairs);
+        let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
+        let got: Vec<(&str, f64)> = spec
+            .tolerances
+            .iter()
+            .map(|t| (t.key.as_str(), t.relative_sd))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                ("skin_plate.thickness", 0.03),
+                ("material.youngs_modulus", 0.02)
+            ],
+            "{text}"
+        );
+        for bad in ["skin_plate.thickness", "=0.03", "skin_plate.thickness=thin"] {
+            let err = run(&parse(bad)).unwrap_err().to_string();
+            assert!(err.contains("--tolerances"), "{bad}: {err}");
         }
     }
 }

@@ -15,10 +15,10 @@ use mitergate::contact::ContactParams;
 use mitergate::data::truth::{self, Scenario};
 use mitergate::inp::{ImportSpec, InpModel};
 use mitergate::reality::Reality;
-use mitergate::{ContactModel, GateConfig, GateMultiLevel};
-use mlmodel::{ObservableModel, UnobservableModel};
+use mitergate::{ContactForceModel, ContactModel, GateConfig, GateMultiLevel, StrainModel};
+use mlmodel::{BuildTolerance, Memo, ObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// Where a gate comes from: a configuration (the embedded default or a gate TOML) or a
@@ -119,6 +119,57 @@ pub struct CalibrateSpec {
     /// BA-MUDI settings (missing keys take their defaults).
     #[serde(default)]
     pub calibration: CalibrationParams,
+    /// Declared tolerances of the gate's build (`[[tolerances]]`), integrated out by the
+    /// marginal mode; none by default.
+    #[serde(default)]
+    pub tolerances: Vec<ToleranceSpec>,
+}
+
+/// One declared tolerance of the gate's build: a numeric gate-configuration field (dotted
+/// key, e.g. `skin_plate.thickness`) known to a relative standard deviation.
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToleranceSpec {
+    /// The field's dotted key in the gate configuration.
+    pub key: String,
+    /// Its standard deviation relative to the drawing's value (in `(0, 0.5]`).
+    pub relative_sd: f64,
+}
+
+/// The gate's models (strains and contact forces) rebuilt at one standard deviation either
+/// side of each declared tolerance of `drawing`; errors name `label`, the tolerance's index
+/// and key.
+pub fn build_tolerances(
+    specs: &[ToleranceSpec],
+    drawing: Option<&GateConfig>,
+    label: &str,
+) -> Result<Vec<BuildTolerance<Memo<ContactForceModel>, StrainModel>>> {
+    let mut out = Vec::with_capacity(specs.len());
+    for (i, t) in specs.iter().enumerate() {
+        let Some(drawing) = drawing else {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: tolerances[{i}] ({}): tolerances need a gate configuration, not an \
+                 imported deck",
+                t.key
+            )));
+        };
+        let side = |factor: f64| -> Result<(Memo<ContactForceModel>, StrainModel)> {
+            let cfg = Reality::scaled_field(drawing, &t.key, factor)
+                .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
+            let (contact, _) = mitergate::build_contact(&cfg)?;
+            let strain = StrainModel::new(contact.gate());
+            // one solve per experiment and round at the posterior mode: no memo needed
+            Ok((Memo::new(ContactForceModel::new(contact), 0), strain))
+        };
+        let ((u_lo, low), (u_hi, high)) = (side(1.0 - t.relative_sd)?, side(1.0 + t.relative_sd)?);
+        out.push(BuildTolerance {
+            name: t.key.clone(),
+            low,
+            high,
+            responses: Some((u_lo, u_hi)),
+        });
+    }
+    Ok(out)
 }
 
 fn default_terms() -> [usize; 2] {
@@ -179,6 +230,22 @@ impl CalibrateSpec {
                 self.discrepancy_terms
             )));
         }
+        for (i, t) in self.tolerances.iter().enumerate() {
+            if !(t.relative_sd.is_finite() && t.relative_sd > 0.0 && t.relative_sd <= 0.5) {
+                return Err(GateAppError::Invalid(format!(
+                    "{label}: tolerances[{i}].relative_sd must lie in (0, 0.5], got {}",
+                    t.relative_sd
+                )));
+            }
+        }
+        if !self.tolerances.is_empty()
+            && self.calibration.coefficients != bamudi::CoefficientMode::Marginal
+        {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: `tolerances` are integrated only by the marginal mode; remove them \
+                 or set coefficients = \"marginal\" in [calibration]"
+            )));
+        }
         if let Err(e) = self.calibration.clone().check() {
             return Err(GateAppError::Invalid(format!(
                 "{label}: in table [calibration]: {e}"
@@ -197,6 +264,36 @@ impl CalibrateSpec {
             )));
         }
         Ok(())
+    }
+
+    /// Checks every declared tolerance against the drawing `gate` (the key names a numeric
+    /// field, and the gate stays valid one standard deviation either side) before anything is
+    /// built.
+    pub fn check_tolerances(&self, label: &str, gate: &GateConfig) -> Result<()> {
+        for (i, t) in self.tolerances.iter().enumerate() {
+            for factor in [1.0 - t.relative_sd, 1.0 + t.relative_sd] {
+                Reality::scaled_field(gate, &t.key, factor).map_err(|e| {
+                    GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}"))
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The gate's multi-level model of `saved` (contact forces memoised, `memo_capacity`
+    /// entries) with this spec's declared tolerances ([`build_tolerances`]); errors name
+    /// `label`.
+    pub fn calibration_model(
+        &self,
+        saved: &SavedModel,
+        memo_capacity: usize,
+        label: &str,
+    ) -> Result<GateMultiLevel> {
+        let tolerances = build_tolerances(&self.tolerances, saved.gate.as_ref(), label)?;
+        saved
+            .multilevel(memo_capacity)?
+            .with_tolerances(tolerances)
+            .map_err(|e| GateAppError::Invalid(format!("{label}: `tolerances`: {e}")))
     }
 
     /// The saved model of a calibration of `contact` (built from `gate`, `None` for a deck)

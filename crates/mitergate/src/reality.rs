@@ -214,6 +214,65 @@ impl Reality {
         Ok(cfg)
     }
 
+    /// The gate `drawing` with the numeric field at the dotted `key` (e.g.
+    /// `skin_plate.thickness`, `material.youngs_modulus`) multiplied by `factor`: a build
+    /// within a tolerance. Errors name the key: not a field, not a number, or an invalid gate.
+    ///
+    /// ```
+    /// use mitergate::{GateConfig, reality::Reality};
+    /// let drawing = GateConfig::default();
+    /// let thin = Reality::scaled_field(&drawing, "skin_plate.thickness", 0.97).unwrap();
+    /// assert!((thin.skin_plate.thickness - 0.97 * drawing.skin_plate.thickness).abs() < 1e-12);
+    /// assert!(Reality::scaled_field(&drawing, "skin_plate.colour", 1.1).is_err());
+    /// assert!(Reality::scaled_field(&drawing, "gauges", 1.1).is_err());
+    /// ```
+    pub fn scaled_field(
+        drawing: &GateConfig,
+        key: &str,
+        factor: f64,
+    ) -> Result<GateConfig, GateError> {
+        let value = toml::Value::try_from(drawing)
+            .map_err(|e| invalid(key, format!("cannot represent the gate: {e}")))?;
+        let parts: Vec<&str> = key.split('.').collect();
+        let mut at = &value;
+        for p in &parts {
+            at = at
+                .get(p)
+                .ok_or_else(|| invalid(key, "not a gate-configuration field"))?;
+        }
+        let nominal = match at {
+            toml::Value::Float(v) => *v,
+            toml::Value::Integer(v) => *v as f64,
+            _ => {
+                return Err(invalid(
+                    key,
+                    "not a number (only numeric fields can be scaled)",
+                ));
+            }
+        };
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(invalid(
+                key,
+                format!("scale factor must be > 0, got {factor}"),
+            ));
+        }
+        let mut over = toml::Value::Float(nominal * factor);
+        for p in parts.iter().rev() {
+            let mut t = toml::Table::new();
+            t.insert((*p).to_string(), over);
+            over = toml::Value::Table(t);
+        }
+        let as_built = match over {
+            toml::Value::Table(t) => t,
+            _ => return Err(invalid(key, "empty key")),
+        };
+        Reality {
+            as_built: Some(as_built),
+            ..Reality::default()
+        }
+        .truth_gate(drawing)
+    }
+
     /// The truth's contact law: `base` with the support's stiffnesses.
     pub fn contact_params(&self, base: ContactParams) -> ContactParams {
         let Some(s) = self.support else { return base };

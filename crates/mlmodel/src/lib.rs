@@ -563,6 +563,26 @@ pub struct MultiLevelModel<U, O> {
     pub prior: Box<dyn Prior>,
     /// The discrepancy basis (its point count must equal `unobservable.coordinates().len()`).
     pub basis: DiscrepancyBasis,
+    /// Declared tolerances of the system's build (none by default; see
+    /// [`with_tolerances`](Self::with_tolerances)).
+    pub tolerances: Vec<BuildTolerance<U, O>>,
+}
+
+/// One uncertain build parameter of the modelled system (a plate thickness, a modulus, a
+/// gauge's position): the models rebuilt at one standard deviation below (`low`) and above
+/// (`high`) its nominal value. A calibration that integrates it treats the parameter's
+/// deviation as `N(0, 1)` in these units and the responses as linear in it over that range
+/// (the central difference `(high − low) / 2` per standard deviation).
+pub struct BuildTolerance<U, O> {
+    /// What varies (a key or a description; reported with the calibration).
+    pub name: String,
+    /// The observable model at the nominal value minus one standard deviation.
+    pub low: O,
+    /// The observable model at the nominal value plus one standard deviation.
+    pub high: O,
+    /// The unobservable model at the same two values, when the parameter changes it too
+    /// (`None`: the nominal unobservable model serves both).
+    pub responses: Option<(U, U)>,
 }
 
 impl<U: UnobservableModel, O: ObservableModel> MultiLevelModel<U, O> {
@@ -599,7 +619,69 @@ impl<U: UnobservableModel, O: ObservableModel> MultiLevelModel<U, O> {
             observable,
             prior,
             basis,
+            tolerances: Vec::new(),
         })
+    }
+
+    /// Declares tolerances of the system's build; each observable model must have the
+    /// nominal one's outputs, in order, and each unobservable model its response layout.
+    ///
+    /// ```
+    /// # use mlmodel::*;
+    /// # use nalgebra::DMatrix;
+    /// # struct One;
+    /// # impl UnobservableModel for One {
+    /// #     fn input_names(&self) -> Vec<String> { vec!["x".into()] }
+    /// #     fn param_dim(&self) -> usize { 1 }
+    /// #     fn components(&self) -> usize { 1 }
+    /// #     fn coordinates(&self) -> &[f64] { &[0.0, 1.0] }
+    /// #     fn evaluate(&self, x: &[f64], t: &[f64], out: &mut [f64]) -> Result<()> {
+    /// #         out.fill(x[0] * t[0]); Ok(())
+    /// #     }
+    /// # }
+    /// // a strain gauge reading `gain × (sum of the response)`; the gain is known to ±2 %
+    /// struct Gauge(f64);
+    /// impl ObservableModel for Gauge {
+    ///     fn output_names(&self) -> Vec<String> { vec!["sg".into()] }
+    ///     fn evaluate(&self, _: &[f64], _: &[f64], y: &[f64], out: &mut [f64]) -> Result<()> {
+    ///         out[0] = self.0 * y.iter().sum::<f64>();
+    ///         Ok(())
+    ///     }
+    /// }
+    /// let basis = DiscrepancyBasis::new(orthopoly::Family::Legendre, (0.0, 1.0), &[0.0, 1.0], &[1]).unwrap();
+    /// let prior = Box::new(UniformPrior::new(vec![(0.0, 1.0)]).unwrap());
+    /// let model = MultiLevelModel::new(One, Gauge(1.0), prior, basis).unwrap();
+    /// let tol = BuildTolerance { name: "gain".into(), low: Gauge(0.98), high: Gauge(1.02), responses: None };
+    /// let model = model.with_tolerances(vec![tol]).unwrap();
+    /// assert_eq!(model.tolerances[0].name, "gain");
+    /// ```
+    pub fn with_tolerances(mut self, tolerances: Vec<BuildTolerance<U, O>>) -> Result<Self> {
+        let names = self.observable.output_names();
+        for t in &tolerances {
+            for (side, m) in [("low", &t.low), ("high", &t.high)] {
+                if m.output_names() != names {
+                    return Err(ModelError::InvalidParameter {
+                        name: "tolerances",
+                        reason: format!(
+                            "tolerance `{}` ({side}): outputs {:?}, the nominal model's are {names:?}",
+                            t.name,
+                            m.output_names()
+                        ),
+                    });
+                }
+            }
+            for u in t.responses.iter().flat_map(|(lo, hi)| [lo, hi]) {
+                if u.response_len() != self.unobservable.response_len() {
+                    return Err(ModelError::Dimension {
+                        what: "tolerance response length vs the nominal unobservable model's",
+                        expected: self.unobservable.response_len(),
+                        got: u.response_len(),
+                    });
+                }
+            }
+        }
+        self.tolerances = tolerances;
+        Ok(self)
     }
 
     /// The corrected response of Eq. 17: `ρ g_u(x, θ) + L α` into `out`.

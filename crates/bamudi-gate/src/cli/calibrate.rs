@@ -49,15 +49,18 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
     let label = a.config.display().to_string();
     if let GateSource::Config(cfg) = &source {
         spec.check_quoin_height(&label, cfg.geometry.quoin_height)?;
+        spec.check_tolerances(&label, cfg)?;
+    } else if !spec.tolerances.is_empty() {
+        anyhow::bail!("{label}: `tolerances` need a gate configuration, not an imported deck");
     }
     let table = bamudi::data::Table::read(&a.data)
         .with_context(|| format!("--data {}", a.data.display()))?;
     let out = StagedDir::prepare("--out", &a.out, a.force)?;
     let built = build_gate(&source)?;
     let saved = spec.saved_model(&label, built.config, built.contact)?;
-    let model = saved
-        .multilevel(50_000)
-        .with_context(|| format!("{label}: `gap_prior` or `discrepancy_terms`"))?;
+    let model = spec
+        .calibration_model(&saved, 50_000, &label)
+        .with_context(|| format!("{label}: `gap_prior`, `discrepancy_terms` or `tolerances`"))?;
     let exps = experiments_from_table(&table, &model)?;
     eprintln!(
         "calibrating on {} experiments of {} ({} gauges), gap prior U({}, {}) in",
@@ -116,6 +119,12 @@ fn print_summary(cal: &Calibration, dir: &Path) {
             "configured"
         }
     );
+    for t in cal.module3().marginal.iter().flat_map(|m| &m.tolerances) {
+        println!(
+            "tolerance {}: {:+.2} ± {:.2} sd (prior N(0, 1), integrated out)",
+            t.name, t.mean, t.sd
+        );
+    }
     if let Some(a) = cal.adequacy() {
         let written = match a.verdict {
             bamudi::Verdict::Inadequate => " (results written; see report.md)",

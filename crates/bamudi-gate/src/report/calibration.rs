@@ -22,6 +22,7 @@
 //!   "timings_s": { "training_set_s": f, "estimator_s": f, "rho_s": f, "gp_s": f, "module3_s": f },
 //!   "inputs": { "config": s, "data": s, "gate": s, "element_size_in": f or null (a deck), "gap_prior_in": [lo, hi],
 //!               "seed": int, "version": s, "warnings": [s] }   // added, schema still 1
+//!   "tolerances": [ { "name": s, "mean": f, "sd": f } ]  // declared tolerances only; added
 //! }
 //! ```
 
@@ -109,6 +110,10 @@ pub struct Results {
     covariance: FactorReport,
     timings_s: Timings,
     inputs: serde_json::Value,
+    /// The declared tolerances of the build with their posteriors, in their standard
+    /// deviations (absent when none were declared).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    tolerances: Vec<bamudi::module3::marginal::ToleranceEstimate>,
     /// The adequacy verdict and its checks (absent when disabled).
     #[serde(skip_serializing_if = "Option::is_none")]
     adequacy: Option<bamudi::AdequacyReport>,
@@ -147,6 +152,11 @@ impl Results {
             covariance: m3.covariance,
             timings_s: cal.timings().clone(),
             inputs: with_version(inputs),
+            tolerances: m3
+                .marginal
+                .as_ref()
+                .map(|m| m.tolerances.clone())
+                .unwrap_or_default(),
             adequacy: cal.adequacy().cloned(),
         }
     }
@@ -437,6 +447,19 @@ pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
     s + "## Results\n\n"
 }
 
+/// The declared tolerances of the build, integrated out, with their posteriors.
+fn tolerances_markdown(tols: &[bamudi::module3::marginal::ToleranceEstimate]) -> String {
+    tols.iter()
+        .map(|t| {
+            format!(
+                "* declared tolerance `{}` integrated out: posterior {:+.2} ± {:.2} of its \
+                 standard deviations (prior N(0, 1))\n",
+                t.name, t.mean, t.sd
+            )
+        })
+        .collect()
+}
+
 fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
     let (m2, m3) = (cal.module2(), cal.module3());
     let mut s = String::from("# BA-MUDI calibration report\n\n");
@@ -454,6 +477,7 @@ fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
     );
     if let Some(m) = &m3.marginal {
         s += &rho_caveat(m);
+        s += &tolerances_markdown(&m.tolerances);
     }
     s += &format!(
         "* sigma_eps = {:.4} microstrain ({})\n",

@@ -803,6 +803,41 @@ fn calibrate_config_files(base: &Base) -> Vec<Case> {
             "gap_prior = [81.0, 105.0]\ngap_prior = [81.0, 105.0]\n",
             &["gap_prior"],
         ),
+        // [[tolerances]]: a relative sd in (0, 0.5], a numeric gate field, the marginal mode
+        cfg(
+            "tolerance_sd_zero",
+            &format!("{PRIOR}[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.0\n"),
+            &["tolerances[0].relative_sd"],
+        ),
+        cfg(
+            "tolerance_sd_above_half",
+            &format!("{PRIOR}[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.9\n"),
+            &["tolerances[0].relative_sd", "(0, 0.5]"],
+        ),
+        cfg(
+            "tolerance_unknown_key",
+            &format!("{PRIOR}[[tolerances]]\nkey = \"skin_plate.colour\"\nrelative_sd = 0.03\n"),
+            &["tolerances[0].key", "skin_plate.colour"],
+        ),
+        cfg(
+            "tolerance_key_not_a_number",
+            &format!("{PRIOR}[[tolerances]]\nkey = \"gauges\"\nrelative_sd = 0.03\n"),
+            &["tolerances[0].key", "not a number"],
+        ),
+        cfg(
+            "tolerance_unknown_field",
+            &format!(
+                "{PRIOR}[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\nunit = \"in\"\n"
+            ),
+            &["unit"],
+        ),
+        cfg(
+            "tolerance_outside_the_marginal_mode",
+            &format!(
+                "{PRIOR}[calibration]\ncoefficients = \"conditional_on_theta\"\n[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\n"
+            ),
+            &["tolerances", "marginal"],
+        ),
         // discrepancy_terms, each in [1, 20]
         cfg(
             "terms_zero",

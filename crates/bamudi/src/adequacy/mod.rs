@@ -10,7 +10,9 @@
 //!   one with Šidák's correction;
 //! * `sensor_offset`, `sensor_gain`, `sensor_drift`, `sensor_step`: a fault's signature on one
 //!   gauge fitted jointly with `ρ`, `θ` and the integrated discrepancy (generalised least
-//!   squares); a z-test each, the step's position searched (Bonferroni).
+//!   squares); a z-test each, the step's position searched (Bonferroni);
+//! * `build_tolerance`: each declared tolerance of the observable model's build, integrated
+//!   out by the calibration: is the deviation the data imply plausible under its prior?
 //!
 //! All p-values form one family with Holm's correction at
 //! [`AdequacyParams::family_alpha`]; the verdict is inadequate when any is rejected. Each
@@ -391,6 +393,7 @@ where
     let condition = checks::worst_condition(&rm, &lay, &p.exps.x)?;
     let faults = checks::sensor_faults(&rm, &lay)?;
     let mut all = family(&gauges, &condition, &faults);
+    all.extend(build_tolerance_checks(&fit.tolerances));
     verdict::correct(&mut all, params.family_alpha);
     let (failed, sensor_correction) =
         verdict::attribute(&all, &faults, &rm, &lay, params.family_alpha)?;
@@ -452,7 +455,7 @@ where
     let state = cal.marginal_state()?;
     let cov = state.covariance();
     let rm =
-        residual::ResidualModel::new(cov.whitened_factor(), cov.t(), cov.sigma2(), &x, &y - &b)?;
+        residual::ResidualModel::new(cov.whitened_factor()?, cov.t(), cov.sigma2(), &x, &y - &b)?;
     let lay = checks::Layout {
         n_e,
         n_o,
@@ -460,6 +463,35 @@ where
         mean: a * fit.rho_mean + b,
     };
     Ok((rm, lay))
+}
+
+/// One test per declared tolerance of the build ([`crate::module3::marginal::nuisance`]):
+/// is the deviation the data imply plausible under its prior `N(0, 1)`? Under the model the
+/// posterior mean `m` of a deviation has variance `1 − sd²` (the prior's variance less the
+/// expected posterior variance), so `z = m / √(1 − sd²)` is standard normal; a gate built
+/// outside its declared tolerance fails it (attributed to the model's form).
+fn build_tolerance_checks(tols: &[crate::module3::marginal::ToleranceEstimate]) -> Vec<Check> {
+    use statrs::function::erf::erfc;
+    tols.iter()
+        .map(|t| {
+            let spread = (1.0 - t.sd * t.sd).max(0.0).sqrt();
+            let z = if spread > 1e-6 { t.mean / spread } else { 0.0 };
+            let p = erfc(z.abs() / std::f64::consts::SQRT_2);
+            Check {
+                check: "build_tolerance".into(),
+                gauge: None,
+                statistic: z,
+                p_value: Some(p),
+                p_adjusted: Some(p),
+                passed: true,
+                detail: format!(
+                    "`{}`: the data put the build at {:+.2} ± {:.2} of its declared standard \
+                     deviations (z = {z:+.2} against its prior)",
+                    t.name, t.mean, t.sd
+                ),
+            }
+        })
+        .collect()
 }
 
 /// Every p-value of the family, in a fixed order.

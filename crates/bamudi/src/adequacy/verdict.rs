@@ -35,8 +35,9 @@ pub(crate) fn correct(checks: &mut [Check], alpha: f64) {
 /// and once those faults — every rejected kind on those gauges, since a real gauge can drift
 /// from an offset start (a linear drift from zero is an offset plus a centred drift) — are
 /// fitted and removed (jointly, with the calibration) the other checks pass. Model form: one
-/// fault kind with one sign on three or more gauges, or gauges failing their leave-one-out
-/// prediction on three or more gauges. Otherwise unexplained.
+/// fault kind with one sign on three or more gauges, gauges failing their leave-one-out
+/// prediction on three or more gauges, or a build outside a declared tolerance. Otherwise
+/// unexplained.
 /// With a sensor attribution comes the joint fit of the suspected faults.
 pub(crate) fn attribute(
     checks: &[Check],
@@ -78,7 +79,10 @@ pub(crate) fn attribute(
     };
     let attribution = if correction.is_some() {
         Attribution::Sensor
-    } else if common.is_some() || logo_gauges.len() >= 3 {
+    } else if common.is_some()
+        || logo_gauges.len() >= 3
+        || failed.iter().any(|c| c.check == "build_tolerance")
+    {
         Attribution::ModelForm
     } else {
         Attribution::Unexplained

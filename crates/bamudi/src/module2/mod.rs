@@ -73,6 +73,16 @@ impl<'a, U: UnobservableModel, O: LinearObservableModel> Problem<'a, U, O> {
         observer: &'a dyn Observer,
     ) -> Result<Self> {
         check_data(model, exps)?;
+        if !model.tolerances.is_empty() && cfg.coefficients != crate::CoefficientMode::Marginal {
+            return Err(BamudiError::InvalidConfig {
+                name: "coefficients",
+                reason: format!(
+                    "the model declares {} observable tolerance(s), which only the marginal mode \
+                     integrates; use coefficients = \"marginal\" or declare none",
+                    model.tolerances.len()
+                ),
+            });
+        }
         let theta_rule = training::theta_rule(
             model.prior.as_ref(),
             &cfg.marginalisation,

@@ -165,6 +165,8 @@ impl UnobservableModel for BeamReaction {
 #[derive(Debug, Clone)]
 pub struct BeamStrain {
     a: DMatrix<f64>,
+    /// The beam's flexural rigidity relative to [`EI_LBF_IN2`] (1: the drawing).
+    stiffness: f64,
 }
 
 /// Microstrain per lbf·in of bending moment on the gauged fibre.
@@ -175,14 +177,20 @@ fn microstrain_per_moment() -> f64 {
 impl BeamStrain {
     /// Builds `A` for the reaction nodes of `reaction`.
     pub fn new(reaction: &BeamReaction) -> Self {
+        Self::with_stiffness(reaction, 1.0)
+    }
+
+    /// As built: the flexural rigidity `stiffness x EI_LBF_IN2` (strains scale with its
+    /// inverse, the reaction's share `A` and the loads' `b` alike).
+    pub fn with_stiffness(reaction: &BeamReaction, stiffness: f64) -> Self {
         let nodes = reaction.coordinates();
         let lengths = reaction.tributary_lengths();
-        let s = microstrain_per_moment();
+        let s = microstrain_per_moment() / stiffness;
         let a = DMatrix::from_fn(GAUGES_IN.len(), nodes.len(), |p, b| {
             // an upward reaction resultant left of the gauge gives a hogging (negative) moment
             -s * lengths[b] * (GAUGES_IN[p] - nodes[b]).max(0.0)
         });
-        Self { a }
+        Self { a, stiffness }
     }
 }
 
@@ -215,7 +223,7 @@ impl LinearObservableModel for BeamStrain {
     fn offset(&self, x: &[f64], _theta: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
         check_len("x", x, 2)?;
         check_len("out", out, GAUGES_IN.len())?;
-        let s = microstrain_per_moment();
+        let s = microstrain_per_moment() / self.stiffness;
         for (o, &g) in out.iter_mut().zip(&GAUGES_IN) {
             let moment = x[1] * g * g / 2.0 + x[0] * (g - LOAD_POSITION_IN).max(0.0);
             *o = s * moment;

@@ -14,6 +14,9 @@ pub struct MarginalState {
     b: DMatrix<f64>,
     /// `Bᵀ B` (`K x K`), used at every prediction input.
     btb: DMatrix<f64>,
+    /// With declared tolerances: `(I ⊗ b_kᵀ) V⁻¹ J_p` per tolerance (`N_e x K` each) and
+    /// `M⁻¹ = (I + Jᵀ V⁻¹ J)⁻¹`, the Woodbury terms of `V' = V + J Jᵀ`.
+    tolerance_terms: Option<(Vec<DMatrix<f64>>, DMatrix<f64>)>,
 }
 
 impl MarginalState {
@@ -26,11 +29,31 @@ impl MarginalState {
     ) -> Result<Self> {
         let (l, b) = supported_basis(parts, fit.support.as_deref());
         let lr = LowRank::new(&fit.priors, x, &fit.amplitudes, &b)?;
+        let cov = Covariance::new(lr, fit.amplitude, sigma2)?
+            .with_tolerances(fit.tolerance_columns.clone());
+        let tolerance_terms = match &cov.nuisance {
+            None => None,
+            Some(nu) => {
+                let (t, n_e) = (cov.t(), x.nrows());
+                let vj = cov.spectrum.inv_apply(&cov.lr, nu.columns(), t, sigma2);
+                let n_o = b.nrows();
+                let per_coef = vj
+                    .column_iter()
+                    .map(|c| DMatrix::from_fn(n_e, n_o, |i, q| c[i * n_o + q]) * &b)
+                    .collect();
+                let p = vj.ncols();
+                let m_inv = nu
+                    .m(&cov.spectrum, t, sigma2)?
+                    .solve(&DMatrix::identity(p, p))?;
+                Some((per_coef, m_inv))
+            }
+        };
         Ok(Self {
-            cov: Covariance::new(lr, fit.amplitude, sigma2)?,
+            cov,
             btb: b.transpose() * &b,
             l,
             b,
+            tolerance_terms,
         })
     }
 
@@ -46,7 +69,7 @@ impl MarginalState {
     }
 
     /// Posterior covariance of the coefficients at `x` given the data (`K x K`; the same at
-    /// every `θ` and `ρ`): `s P − s² Cy V⁻¹ Cyᵀ`, with `P` the prior correlation at `x`
+    /// every `θ` and `ρ`): `s P − s² Cy V'⁻¹ Cyᵀ` (`V' = V + J Jᵀ` with declared tolerances), with `P` the prior correlation at `x`
     /// scaled by `ax`, `Cy` the prior covariance between the coefficients at `x` and the
     /// observations, and `cmat[:, k] = C_k(x, X)` ([`MarginalFit::cross_cov`]).
     pub fn coefficient_cov(
@@ -63,7 +86,14 @@ impl MarginalState {
             cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
         });
         let qz = cov.spectrum.project_cross(&cov.lr, cmat);
-        let q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
+        let mut q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
+        if let Some((per_coef, m_inv)) = &self.tolerance_terms {
+            // Woodbury: Cy V'⁻¹ Cyᵀ = Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = Cy V⁻¹ J (per unit s)
+            let d = DMatrix::from_fn(k, per_coef.len(), |c, p| {
+                cmat.column(c).dot(&per_coef[p].column(c))
+            });
+            q -= &d * m_inv * d.transpose();
+        }
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
             true => ax[i] * ax[i] * fit.priors[i].cov(x, x),
             false => 0.0,
