@@ -156,7 +156,12 @@ pub fn build_tolerances(
         let side = |factor: f64| -> Result<(Memo<ContactForceModel>, StrainModel)> {
             let cfg = Reality::scaled_field(drawing, &t.key, factor)
                 .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
-            let (contact, _) = mitergate::build_contact(&cfg)?;
+            let (contact, _) = mitergate::build_contact(&cfg).map_err(|e| {
+                GateAppError::Invalid(format!(
+                    "{label}: tolerances[{i}] ({}) at {factor} x the drawing: {e}",
+                    t.key
+                ))
+            })?;
             let strain = StrainModel::new(contact.gate());
             // one solve per experiment and round at the posterior mode: no memo needed
             Ok((Memo::new(ContactForceModel::new(contact), 0), strain))
@@ -237,6 +242,18 @@ impl CalibrateSpec {
                     t.relative_sd
                 )));
             }
+        }
+        if let Some((i, t)) = self
+            .tolerances
+            .iter()
+            .enumerate()
+            .find(|(i, t)| self.tolerances[..*i].iter().any(|o| o.key == t.key))
+        {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: tolerances[{i}].key {:?} is declared twice (its variance would count \
+                 twice)",
+                t.key
+            )));
         }
         if !self.tolerances.is_empty()
             && self.calibration.coefficients != bamudi::CoefficientMode::Marginal

@@ -825,6 +825,13 @@ fn calibrate_config_files(base: &Base) -> Vec<Case> {
             &["tolerances[0].key", "not a number"],
         ),
         cfg(
+            "tolerance_declared_twice",
+            &format!(
+                "{PRIOR}[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\n[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.02\n"
+            ),
+            &["tolerances[1].key", "twice"],
+        ),
+        cfg(
             "tolerance_unknown_field",
             &format!(
                 "{PRIOR}[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\nunit = \"in\"\n"

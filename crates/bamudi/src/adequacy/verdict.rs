@@ -92,7 +92,12 @@ pub(crate) fn attribute(
         .map(|c| FailedCheck {
             check: c.check.clone(),
             gauges: c.gauge.iter().cloned().collect(),
-            attribution,
+            // a build outside its declared tolerance is the model's, whatever else failed: no
+            // sensor correction re-tests it
+            attribution: match c.check.as_str() {
+                "build_tolerance" => Attribution::ModelForm,
+                _ => attribution,
+            },
             detail: match (&c.gauge, &correction) {
                 (Some(g), Some(corr)) if !accused(g) => format!(
                     "{}; not significant once {} is fitted jointly: a spill-over of that \

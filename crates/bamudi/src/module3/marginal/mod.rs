@@ -209,7 +209,8 @@ pub struct MarginalFit {
 }
 
 /// The posterior of one declared tolerance's deviation, in its standard deviations (prior
-/// `N(0, 1)`), given the posterior mode of `θ` and `ρ`'s mean there.
+/// `N(0, 1)`), given the posterior mode of `θ` and `ρ`'s posterior mean (its sd leaves out
+/// their spread).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ToleranceEstimate {
     /// The tolerance's name ([`mlmodel::BuildTolerance::name`]).
@@ -1041,29 +1042,33 @@ mod tests {
 
     /// With declared tolerances `V' = V + J Jᵀ`: the Woodbury forms (solves, the Gram matrix
     /// with its Schur complement, the log determinant, the whitened factor with its appended
-    /// columns) equal the dense `V'`, in the primal and in the dual form of the spectrum.
+    /// columns) equal the dense `V'`, on a primal spectrum (3 gauges, 2 coefficients: rank
+    /// below the 36 observations) and a dual one (2 gauges, 3 coefficients: rank up to 39
+    /// against 24 observations).
     #[test]
     fn the_tolerances_woodbury_terms_match_the_dense_covariance() {
-        for (n_e, tol) in [(12, 1e-14), (4, 1e-14)] {
+        let primal = DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]);
+        let dual = DMatrix::from_row_slice(2, 3, &[1.0, 0.4, 0.2, -0.6, 1.3, 0.9]);
+        for (b, want_dual) in [(primal, false), (dual, true)] {
+            let (n_e, n_o, n_k) = (12, b.nrows(), b.ncols());
             let x = DMatrix::from_fn(n_e, 1, |i, _| i as f64 / 3.0);
             let prior = CoefficientPrior {
                 kernel: gp::Kernel::Matern52 { ard: false },
-                length_scales: vec![1.1],
+                length_scales: vec![0.6],
                 level_variance: 0.7,
             };
-            let b = DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]);
-            let amps = DMatrix::from_fn(n_e, 2, |i, k| 1.0 + 0.1 * (i + k) as f64);
-            let lr = LowRank::with_tolerance(&[prior.clone(), prior.clone()], &x, &amps, &b, tol)
-                .unwrap();
-            let n_s = 3 * n_e;
+            let amps = DMatrix::from_fn(n_e, n_k, |i, k| 1.0 + 0.1 * (i + k) as f64);
+            let lr =
+                LowRank::with_tolerance(&vec![prior.clone(); n_k], &x, &amps, &b, 1e-14).unwrap();
+            let n_s = n_o * n_e;
+            assert_eq!(lr.rank() > n_s, want_dual, "rank {} of {n_s}", lr.rank());
             let (s, sigma2) = (1.3, 0.2);
             let k = prior.matrix(&x, &x);
             let mut v = DMatrix::identity(n_s, n_s) * sigma2;
-            for c in 0..2 {
-                let bb = b.column(c) * b.column(c).transpose();
+            for c in 0..n_k {
                 v += DMatrix::from_fn(n_s, n_s, |r, q| {
-                    let (i, j) = (r / 3, q / 3);
-                    s * amps[(i, c)] * amps[(j, c)] * k[(i, j)] * bb[(r % 3, q % 3)]
+                    let (i, j) = (r / n_o, q / n_o);
+                    s * amps[(i, c)] * amps[(j, c)] * k[(i, j)] * b[(r % n_o, c)] * b[(q % n_o, c)]
                 });
             }
             // two tolerance columns of the size of the data's variation (O(1))
@@ -1074,19 +1079,14 @@ mod tests {
                 .with_tolerances(Some(j));
             let dense = Cholesky::new(&v_tol, "V'").unwrap();
             let u = DMatrix::from_fn(n_s, 2, |i, c| ((i * 7 + c * 5) % 11) as f64 - 5.0);
-            // a 36 x 36 (or 12 x 12) system with condition number about 1e3-1e4: rounding
-            // stays far below 1e-6 relative; a dropped Woodbury term changes every quantity
-            // by O(1) (J is of the size of the data)
+            // systems of 24-36 with condition numbers about 1e3-1e4: rounding stays far below
+            // 1e-6 relative; a dropped Woodbury term changes every quantity by O(1) (J is of
+            // the size of the data)
             let ours = cov.inv_apply(&u).unwrap();
             assert!((&v_tol * &ours - &u).amax() < 1e-6 * u.amax(), "V'⁻¹ u");
+            let qu = cov.spectrum.project(&cov.lr, &u);
             let (g, ld) = cov
-                .gram_at(
-                    &u,
-                    &cov.spectrum.project(&cov.lr, &u),
-                    &u.tr_mul(&u),
-                    cov.t(),
-                    sigma2,
-                )
+                .gram_at(&u, &qu, &u.tr_mul(&u), cov.t(), sigma2)
                 .unwrap();
             let g_dense = u.tr_mul(&dense.solve(&u).unwrap());
             assert!((&g - &g_dense).amax() < 1e-6 * g_dense.amax(), "Gram");

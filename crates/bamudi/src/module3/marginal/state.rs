@@ -29,6 +29,15 @@ impl MarginalState {
     ) -> Result<Self> {
         let (l, b) = supported_basis(parts, fit.support.as_deref());
         let lr = LowRank::new(&fit.priors, x, &fit.amplitudes, &b)?;
+        if let Some(j) = &fit.tolerance_columns
+            && j.nrows() != lr.n_obs()
+        {
+            return Err(crate::error::BamudiError::dim(
+                "tolerance columns of the marginal fit (rows) vs the observations",
+                lr.n_obs(),
+                j.nrows(),
+            ));
+        }
         let cov = Covariance::new(lr, fit.amplitude, sigma2)?
             .with_tolerances(fit.tolerance_columns.clone());
         let tolerance_terms = match &cov.nuisance {
