@@ -278,6 +278,15 @@ struct Stacked {
     ac: DMatrix<f64>,
 }
 
+/// `V⁻¹ J` and the factored `I + Jᵀ V⁻¹ J` ([`Covariance::tolerance_solve`]).
+pub(crate) type TolerancesSolved = (DMatrix<f64>, numerics::Cholesky);
+
+/// The reshaped column `c` of `v` (`N_s`, experiment-major) times `B`: `(I ⊗ b_kᵀ) v` per
+/// coefficient (`N_e x K`).
+fn per_coefficient(v: &DMatrix<f64>, c: usize, n_o: usize, b: &DMatrix<f64>) -> DMatrix<f64> {
+    DMatrix::from_fn(v.nrows() / n_o, n_o, |i, q| v[(i * n_o + q, c)]) * b
+}
+
 /// The factor of `V` with its spectrum, amplitude and noise, and the declared tolerances'
 /// columns (`V' = V + J Jᵀ`; [`nuisance`]).
 #[derive(Debug, Clone)]
@@ -325,14 +334,11 @@ impl Covariance {
     /// tolerances the columns `σ t^{-1/2} V⁻¹ J L⁻ᵀ` appended (`M = L Lᵀ`).
     pub(crate) fn whitened_factor(&self) -> Result<DMatrix<f64>> {
         let z = self.spectrum.whitened_factor(&self.lr, self.t());
-        let Some(nu) = &self.nuisance else {
+        let Some((vj, m)) = self.tolerance_solve()? else {
             return Ok(z);
         };
-        let vj = self
-            .spectrum
-            .inv_apply(&self.lr, nu.columns(), self.t(), self.sigma2);
-        let l = nu.m(&self.spectrum, self.t(), self.sigma2)?.l();
-        let u = l
+        let u = m
+            .l()
             .solve_lower_triangular(&vj.transpose())
             .ok_or_else(|| BamudiError::Numerical {
                 context: "whitened factor of the declared tolerances".into(),
@@ -356,16 +362,29 @@ impl Covariance {
         }
     }
 
-    /// `V'⁻¹ v` for the columns of `v`.
-    pub(crate) fn inv_apply(&self, v: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        let (t, sigma2) = (self.t(), self.sigma2);
-        let inv = self.spectrum.inv_apply(&self.lr, v, t, sigma2);
+    /// `V⁻¹ J` and the factored `M = I + Jᵀ V⁻¹ J` of the declared tolerances (`None`: none
+    /// declared): what every Woodbury form of `V'` needs.
+    pub(crate) fn tolerance_solve(&self) -> Result<Option<TolerancesSolved>> {
         let Some(nu) = &self.nuisance else {
-            return Ok(inv);
+            return Ok(None);
         };
+        let (t, sigma2) = (self.t(), self.sigma2);
         let vj = self.spectrum.inv_apply(&self.lr, nu.columns(), t, sigma2);
-        let m = nu.m(&self.spectrum, t, sigma2)?;
-        Ok(inv - &vj * m.solve(&vj.tr_mul(v))?)
+        Ok(Some((vj, nu.m(&self.spectrum, t, sigma2)?)))
+    }
+
+    /// `V'⁻¹ v` for the columns of `v`, with the tolerances' terms of
+    /// [`tolerance_solve`](Self::tolerance_solve) computed once by the caller.
+    fn inv_apply(
+        &self,
+        v: &DMatrix<f64>,
+        solved: Option<&TolerancesSolved>,
+    ) -> Result<DMatrix<f64>> {
+        let inv = self.spectrum.inv_apply(&self.lr, v, self.t(), self.sigma2);
+        match solved {
+            None => Ok(inv),
+            Some((vj, m)) => Ok(inv - vj * m.solve(&vj.tr_mul(v))?),
+        }
     }
 
     /// `Uᵀ V'⁻¹ U` and `ln |V'|` at `t` and `σ²` (the hyper-parameter search's trial values)
@@ -834,25 +853,25 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let (n_e, n_o) = (lik.p.exps.len(), lik.p.exps.y.ncols());
+    let n_o = lik.p.exps.y.ncols();
     let cov = &lik.cov;
     let b = cov.lr.b();
+    let solved = cov.tolerance_solve()?;
     let support = post.support(&SupportPolicy::default().max_nodes(STORED_NODES));
     support
         .par_iter()
         .map(|(theta, weight)| {
             let st = lik.stacked(theta)?;
-            let inv = cov.inv_apply(&st.ac)?;
+            let inv = cov.inv_apply(&st.ac, solved.as_ref())?;
             let terms = cov.terms(&st, lik.rho_range())?;
             let (rho_mean, rho_var) = truncated_moments(terms.rho_hat, terms.q2, lik.rho_range());
-            let per_coef = |c: usize| DMatrix::from_fn(n_e, n_o, |i, q| inv[(i * n_o + q, c)]) * b;
             Ok(MarginalNode {
                 theta: theta.clone(),
                 weight: *weight,
                 rho_mean,
                 rho_var,
-                u0: per_coef(1),
-                u1: per_coef(0),
+                u0: per_coefficient(&inv, 1, n_o, b),
+                u1: per_coefficient(&inv, 0, n_o, b),
             })
         })
         .collect()
@@ -869,16 +888,13 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let (cov, tols) = (&lik.cov, &lik.p.model.tolerances);
-    let Some(nu) = &cov.nuisance else {
+    let tols = &lik.p.model.tolerances;
+    let Some((vj, m)) = lik.cov.tolerance_solve()? else {
         return Ok(Vec::new());
     };
     let st = lik.stacked(theta)?;
     let r = st.ac.column(1) - st.ac.column(0) * rho;
     let r = DMatrix::from_column_slice(r.len(), 1, r.as_slice());
-    let (t, sigma2) = (cov.t(), cov.sigma2);
-    let vj = cov.spectrum.inv_apply(&cov.lr, nu.columns(), t, sigma2);
-    let m = nu.m(&cov.spectrum, t, sigma2)?;
     let mean = m.solve(&vj.tr_mul(&r))?;
     let var = m.solve(&DMatrix::identity(tols.len(), tols.len()))?;
     Ok(tols
@@ -1082,7 +1098,9 @@ mod tests {
             // systems of 24-36 with condition numbers about 1e3-1e4: rounding stays far below
             // 1e-6 relative; a dropped Woodbury term changes every quantity by O(1) (J is of
             // the size of the data)
-            let ours = cov.inv_apply(&u).unwrap();
+            let ours = cov
+                .inv_apply(&u, cov.tolerance_solve().unwrap().as_ref())
+                .unwrap();
             assert!((&v_tol * &ours - &u).amax() < 1e-6 * u.amax(), "V'⁻¹ u");
             let qu = cov.spectrum.project(&cov.lr, &u);
             let (g, ld) = cov

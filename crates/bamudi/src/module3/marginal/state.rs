@@ -1,6 +1,6 @@
 //! What Module 4 needs of the marginal mode: the coefficients' posterior at new inputs.
 
-use super::{Covariance, LowRank, MarginalFit, MarginalNode, supported_basis};
+use super::{Covariance, LowRank, MarginalFit, MarginalNode, per_coefficient, supported_basis};
 use crate::error::Result;
 use crate::module2::training::LinearParts;
 use nalgebra::{DMatrix, DVector};
@@ -40,21 +40,14 @@ impl MarginalState {
         }
         let cov = Covariance::new(lr, fit.amplitude, sigma2)?
             .with_tolerances(fit.tolerance_columns.clone());
-        let tolerance_terms = match &cov.nuisance {
+        let tolerance_terms = match cov.tolerance_solve()? {
             None => None,
-            Some(nu) => {
-                let (t, n_e) = (cov.t(), x.nrows());
-                let vj = cov.spectrum.inv_apply(&cov.lr, nu.columns(), t, sigma2);
-                let n_o = b.nrows();
-                let per_coef = vj
-                    .column_iter()
-                    .map(|c| DMatrix::from_fn(n_e, n_o, |i, q| c[i * n_o + q]) * &b)
-                    .collect();
+            Some((vj, m)) => {
                 let p = vj.ncols();
-                let m_inv = nu
-                    .m(&cov.spectrum, t, sigma2)?
-                    .solve(&DMatrix::identity(p, p))?;
-                Some((per_coef, m_inv))
+                let per_coef = (0..p)
+                    .map(|c| per_coefficient(&vj, c, b.nrows(), &b))
+                    .collect();
+                Some((per_coef, m.solve(&DMatrix::identity(p, p))?))
             }
         };
         Ok(Self {
