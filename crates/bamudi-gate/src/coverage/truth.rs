@@ -17,6 +17,11 @@ pub enum DiscrepancyShape {
     /// `θ*` (normal force `3 h (762 − d)³/1200³`, tangential `(h/100)² sin(d/240)`, `h` the
     /// head).
     Paper,
+    /// The paper's expressions with the quoin point that straddles the gap's edge loaded by
+    /// its contact coverage at `θ*` ([`ContactModel::coverage`]: the fraction of the point's
+    /// lower cell above `θ*`), the convention of the contact model's own forces: the step
+    /// sits at `θ*` rather than at the first point above it.
+    PaperCell,
     /// The same expressions without the gap: every point, also below `θ*`.
     Unmasked,
     /// The paper's expressions rising smoothly from zero at the gap's edge
@@ -34,7 +39,7 @@ impl DiscrepancyShape {
     /// component blocked (normal, then tangential).
     pub fn delta(self, x: [f64; 2], d_u: &[f64], theta_star: f64) -> Vec<f64> {
         match self {
-            Self::Paper => true_discrepancy(x, d_u, theta_star, 1.0),
+            Self::Paper | Self::PaperCell => true_discrepancy(x, d_u, theta_star, 1.0),
             Self::Unmasked => true_discrepancy(x, d_u, f64::NEG_INFINITY, 1.0),
             Self::None => vec![0.0; 2 * d_u.len()],
             Self::Tapered => {
@@ -66,7 +71,14 @@ impl Truth {
     /// The true quoin forces `ρ g(x, θ*) + δ(x)` (lbf/in, blocked).
     pub fn forces(&self, contact: &ContactModel, x: [f64; 2]) -> Result<Vec<f64>> {
         let mut f = contact.solve(x[0], x[1], self.theta)?.forces;
-        let delta = self.shape.delta(x, &contact.gate().nu_points, self.theta);
+        let mut delta = self.shape.delta(x, &contact.gate().nu_points, self.theta);
+        if self.shape == DiscrepancyShape::PaperCell {
+            let n = delta.len() / 2;
+            for (b, c) in contact.coverage(self.theta).into_iter().enumerate() {
+                delta[b] *= c;
+                delta[n + b] *= c;
+            }
+        }
         f.iter_mut()
             .zip(&delta)
             .for_each(|(f, d)| *f = self.rho * *f + d);
@@ -92,5 +104,46 @@ impl Truth {
             }
         }
         Ok(y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mitergate::contact::ContactParams;
+
+    /// `PaperCell` is the paper's shape except at the point straddling the gap's edge, which
+    /// carries the fraction of its discrepancy that its contact coverage says (points at 0,
+    /// 190.5, 381, 571.5, 762 in; `θ* = 95.25` covers half of the second point's lower cell).
+    #[test]
+    fn the_cell_weighted_shape_differs_only_at_the_straddling_point() {
+        let contact = ContactParams::default()
+            .build(mitergate::testing::doc_gate())
+            .unwrap();
+        let x = [700.0, 50.0];
+        let truth = |shape| Truth {
+            theta: 95.25,
+            rho: 0.8,
+            shape,
+        };
+        let paper = truth(DiscrepancyShape::Paper).forces(&contact, x).unwrap();
+        let cell = truth(DiscrepancyShape::PaperCell)
+            .forces(&contact, x)
+            .unwrap();
+        let delta = DiscrepancyShape::Paper.delta(x, &contact.gate().nu_points, 95.25);
+        let n = delta.len() / 2;
+        for b in 0..2 * n {
+            let expected = if b % n == 1 { 0.5 * delta[b] } else { 0.0 };
+            // rounding of ρ g + δ at the scale of the forces (1e4 lbf/in)
+            let tol = 1e-9 * paper[b].abs().max(1.0);
+            assert!(
+                ((paper[b] - cell[b]) - expected).abs() <= tol,
+                "point {b}: paper {} cell {} delta {}",
+                paper[b],
+                cell[b],
+                delta[b]
+            );
+        }
+        assert!(delta[1] > 0.0, "the straddling point carries a discrepancy");
     }
 }
