@@ -162,6 +162,20 @@ impl Calibration {
             .transpose()
     }
 
+    /// The declared build tolerances' posteriors as JSON text (`[]` when none were declared):
+    /// each tolerance's name and the posterior mean and sd of its deviation, in its own
+    /// standard deviations, as `results.json` (`tolerances`) holds them.
+    fn tolerances_json(&self) -> PyResult<String> {
+        let tolerances = self
+            .cal
+            .module3()
+            .marginal
+            .as_ref()
+            .map(|m| m.tolerances.clone())
+            .unwrap_or_default();
+        serde_json::to_string(&tolerances).map_err(to_py)
+    }
+
     /// The posterior's warnings (mass piled at a prior bound, an interval narrower than three
     /// evaluated grid spacings), as the command line prints them and writes them into
     /// `results.json` (`inputs.warnings`); also logged when the calibration ends.

@@ -49,6 +49,10 @@ def test_configuration_errors(gate, experiments):
     expect("`discrepancy_terms` must be in [1, 20]", bamudi.calibrate, gate, experiments,
            cfg(discrepancy_terms=[0, 6]))
     expect("unknown field", bamudi.calibrate, gate, experiments, cfg(colour="red"))
+    expect("tolerances[0].key", bamudi.calibrate, gate, experiments,
+           cfg(tolerances=[{"key": "skin_plate.colour", "relative_sd": 0.03}]))
+    expect("tolerances[0].relative_sd", bamudi.calibrate, gate, experiments,
+           cfg(tolerances=[{"key": "skin_plate.thickness", "relative_sd": 0.9}]))
     expect("in table [calibration]", bamudi.calibrate, gate, experiments,
            cfg(calibration={"theta_grid_points": 1}))
     expect("parsing config", bamudi.calibrate, gate, experiments, "gap_prior = [")

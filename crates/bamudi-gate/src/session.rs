@@ -288,9 +288,12 @@ impl CalibrateSpec {
     /// built.
     pub fn check_tolerances(&self, label: &str, gate: &GateConfig) -> Result<()> {
         for (i, t) in self.tolerances.iter().enumerate() {
+            // the drawing itself is valid: a failure at x 1 is the key's
+            Reality::scaled_field(gate, &t.key, 1.0)
+                .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
             for factor in [1.0 - t.relative_sd, 1.0 + t.relative_sd] {
                 Reality::scaled_field(gate, &t.key, factor).map_err(|e| {
-                    GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}"))
+                    GateAppError::Invalid(format!("{label}: tolerances[{i}].relative_sd: {e}"))
                 })?;
             }
         }

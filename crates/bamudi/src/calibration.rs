@@ -341,11 +341,11 @@ impl Calibration {
     /// attribution the application gives it should it fail (a physical check that passes once
     /// the suspected sensor faults are removed, [`AdequacyReport::sensor_correction`], is a
     /// sensor's doing; otherwise the model's form). Each check's `passed` is taken as given
-    /// (tolerance checks; they do not enter the p-value family); a failed one makes the
+    /// (threshold checks; they do not enter the p-value family); a failed one makes the
     /// verdict inadequate and is listed. Nothing happens when the checks are disabled.
     pub fn add_adequacy_checks(&mut self, checks: Vec<(Check, Attribution)>) {
         if let Some(a) = self.adequacy.as_mut() {
-            a.add_tolerance_checks(checks);
+            a.add_threshold_checks(checks);
         }
     }
     /// `A`, `L` and `B = A L` of the calibrated model.

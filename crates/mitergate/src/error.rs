@@ -199,6 +199,16 @@ pub enum GateError {
         /// Why.
         reason: String,
     },
+    /// A gate-configuration field named by a dotted key cannot be scaled
+    /// ([`Reality::scaled_field`](crate::reality::Reality::scaled_field)): not a field, not a
+    /// number, a factor that is not positive, or a gate that is invalid once scaled.
+    #[error("gate field `{key}`: {reason}")]
+    GateField {
+        /// The dotted key.
+        key: String,
+        /// Why.
+        reason: String,
+    },
     /// Assembling the `mlmodel` multi-level model (prior, discrepancy basis, dimensions)
     /// failed.
     #[error("multi-level model: {0}")]

@@ -111,6 +111,13 @@ pub struct SensorStep {
     pub size_microstrain: f64,
 }
 
+fn field_error(key: &str, reason: impl Into<String>) -> GateError {
+    GateError::GateField {
+        key: key.to_string(),
+        reason: reason.into(),
+    }
+}
+
 fn invalid(key: impl Into<String>, reason: impl Into<String>) -> GateError {
     GateError::InvalidReality {
         key: key.into(),
@@ -232,26 +239,26 @@ impl Reality {
         factor: f64,
     ) -> Result<GateConfig, GateError> {
         let value = toml::Value::try_from(drawing)
-            .map_err(|e| invalid(key, format!("cannot represent the gate: {e}")))?;
+            .map_err(|e| field_error(key, format!("cannot represent the gate: {e}")))?;
         let parts: Vec<&str> = key.split('.').collect();
         let mut at = &value;
         for p in &parts {
             at = at
                 .get(p)
-                .ok_or_else(|| invalid(key, "not a gate-configuration field"))?;
+                .ok_or_else(|| field_error(key, "not a gate-configuration field"))?;
         }
         let nominal = match at {
             toml::Value::Float(v) => *v,
             toml::Value::Integer(v) => *v as f64,
             _ => {
-                return Err(invalid(
+                return Err(field_error(
                     key,
                     "not a number (only numeric fields can be scaled)",
                 ));
             }
         };
         if !(factor.is_finite() && factor > 0.0) {
-            return Err(invalid(
+            return Err(field_error(
                 key,
                 format!("scale factor must be > 0, got {factor}"),
             ));
@@ -264,13 +271,20 @@ impl Reality {
         }
         let as_built = match over {
             toml::Value::Table(t) => t,
-            _ => return Err(invalid(key, "empty key")),
+            _ => return Err(field_error(key, "empty key")),
         };
         Reality {
             as_built: Some(as_built),
             ..Reality::default()
         }
         .truth_gate(drawing)
+        .map_err(|e| {
+            let reason = match e {
+                GateError::InvalidReality { reason, .. } => reason,
+                other => other.to_string(),
+            };
+            field_error(key, format!("at {factor} x the drawing: {reason}"))
+        })
     }
 
     /// The truth's contact law: `base` with the support's stiffnesses.

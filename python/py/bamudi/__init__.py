@@ -165,6 +165,14 @@ class Calibration:
         return None if text is None else json.loads(text)
 
     @property
+    def tolerances(self) -> list:
+        """The declared build tolerances (``[[tolerances]]`` of the configuration, marginal mode)
+        with what the data say of each: ``[{"name", "mean", "sd"}]``, the posterior mean and sd
+        of the build's deviation in the tolerance's own standard deviations (prior N(0, 1)), as
+        in ``results.json``; ``[]`` when none were declared."""
+        return json.loads(self._native.tolerances_json())
+
+    @property
     def warnings(self) -> list:
         """The posterior's warnings (mass at a prior bound, an under-resolved interval), as the
         command line prints them; also logged (``logging``) when the calibration ends."""

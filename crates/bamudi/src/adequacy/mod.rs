@@ -123,7 +123,7 @@ pub struct Check {
     pub gauge: Option<String>,
     /// Its statistic.
     pub statistic: f64,
-    /// Its p-value alone (`None`: a tolerance check, outside the p-value family).
+    /// Its p-value alone (`None`: a threshold check, outside the p-value family).
     pub p_value: Option<f64>,
     /// Holm-adjusted over the family.
     pub p_adjusted: Option<f64>,
@@ -322,8 +322,9 @@ impl AdequacyReport {
         self.checks.iter().filter(|c| c.p_value.is_some()).count()
     }
 
-    /// Adds tolerance checks (see [`Calibration::add_adequacy_checks`]).
-    pub fn add_tolerance_checks(&mut self, checks: Vec<(Check, Attribution)>) {
+    /// Adds threshold checks: checks with a pass threshold rather than a p-value (see
+    /// [`Calibration::add_adequacy_checks`]).
+    pub fn add_threshold_checks(&mut self, checks: Vec<(Check, Attribution)>) {
         for (c, attribution) in checks {
             if !c.passed {
                 self.failed.push(FailedCheck {
@@ -344,7 +345,7 @@ impl AdequacyReport {
     pub fn summary(&self) -> String {
         match self.verdict {
             Verdict::Adequate => format!(
-                "adequate ({} tests at family-wise error {}, {} tolerance check(s))",
+                "adequate ({} tests at family-wise error {}, {} threshold check(s))",
                 self.family_size(),
                 self.family_alpha,
                 self.checks.len() - self.family_size()
