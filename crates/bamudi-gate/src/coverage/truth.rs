@@ -22,6 +22,10 @@ pub enum DiscrepancyShape {
     /// lower cell above `θ*`), the convention of the contact model's own forces: the step
     /// sits at `θ*` rather than at the first point above it.
     PaperCell,
+    /// The paper's normal discrepancy alone (Eq. 53; no tangential part).
+    PaperNormal,
+    /// The paper's tangential discrepancy alone (Eq. 54; no normal part).
+    PaperTangential,
     /// The same expressions without the gap: every point, also below `θ*`.
     Unmasked,
     /// The paper's expressions rising smoothly from zero at the gap's edge
@@ -42,6 +46,17 @@ impl DiscrepancyShape {
             Self::Paper | Self::PaperCell => true_discrepancy(x, d_u, theta_star, 1.0),
             Self::Unmasked => true_discrepancy(x, d_u, f64::NEG_INFINITY, 1.0),
             Self::None => vec![0.0; 2 * d_u.len()],
+            Self::PaperNormal | Self::PaperTangential => {
+                let mut d = true_discrepancy(x, d_u, theta_star, 1.0);
+                let n = d_u.len();
+                let zeroed = if self == Self::PaperNormal {
+                    n..2 * n
+                } else {
+                    0..n
+                };
+                d[zeroed].fill(0.0);
+                d
+            }
             Self::Tapered => {
                 let mut d = true_discrepancy(x, d_u, theta_star, 1.0);
                 let n = d_u.len();
@@ -145,5 +160,22 @@ mod tests {
             );
         }
         assert!(delta[1] > 0.0, "the straddling point carries a discrepancy");
+    }
+
+    /// The normal and tangential parts of the paper's shape split it: each keeps its own
+    /// component and zeroes the other, and together they are the paper's δ exactly.
+    #[test]
+    fn the_paper_shape_splits_into_its_components() {
+        let d = [0.0, 190.5, 381.0, 571.5, 762.0];
+        let x = [700.0, 50.0];
+        let paper = DiscrepancyShape::Paper.delta(x, &d, 95.25);
+        let normal = DiscrepancyShape::PaperNormal.delta(x, &d, 95.25);
+        let tangential = DiscrepancyShape::PaperTangential.delta(x, &d, 95.25);
+        let n = d.len();
+        assert!(normal[n..].iter().all(|&v| v == 0.0) && tangential[..n].iter().all(|&v| v == 0.0));
+        assert!(normal[..n].iter().any(|&v| v != 0.0) && tangential[n..].iter().any(|&v| v != 0.0));
+        for b in 0..2 * n {
+            assert_eq!(normal[b] + tangential[b], paper[b], "entry {b}");
+        }
     }
 }
