@@ -39,11 +39,21 @@ pub enum DiscrepancyShape {
 const TAPER_IN: f64 = 60.0;
 
 impl DiscrepancyShape {
-    /// `δ` at levels `x` (in) on the quoin points `d_u` (in) for the gap `theta_star` (in),
-    /// component blocked (normal, then tangential).
-    pub fn delta(self, x: [f64; 2], d_u: &[f64], theta_star: f64) -> Vec<f64> {
+    /// `δ` at levels `x` (in) on the quoin points of `contact`'s gate for the gap `theta_star`
+    /// (in), component blocked (normal, then tangential).
+    pub fn delta(self, contact: &ContactModel, x: [f64; 2], theta_star: f64) -> Vec<f64> {
+        let d_u = &contact.gate().nu_points;
         match self {
-            Self::Paper | Self::PaperCell => true_discrepancy(x, d_u, theta_star, 1.0),
+            Self::Paper => true_discrepancy(x, d_u, theta_star, 1.0),
+            Self::PaperCell => {
+                let mut d = true_discrepancy(x, d_u, theta_star, 1.0);
+                let n = d_u.len();
+                for (b, c) in contact.coverage(theta_star).into_iter().enumerate() {
+                    d[b] *= c;
+                    d[n + b] *= c;
+                }
+                d
+            }
             Self::Unmasked => true_discrepancy(x, d_u, f64::NEG_INFINITY, 1.0),
             Self::None => vec![0.0; 2 * d_u.len()],
             Self::PaperNormal | Self::PaperTangential => {
@@ -86,14 +96,7 @@ impl Truth {
     /// The true quoin forces `ρ g(x, θ*) + δ(x)` (lbf/in, blocked).
     pub fn forces(&self, contact: &ContactModel, x: [f64; 2]) -> Result<Vec<f64>> {
         let mut f = contact.solve(x[0], x[1], self.theta)?.forces;
-        let mut delta = self.shape.delta(x, &contact.gate().nu_points, self.theta);
-        if self.shape == DiscrepancyShape::PaperCell {
-            let n = delta.len() / 2;
-            for (b, c) in contact.coverage(self.theta).into_iter().enumerate() {
-                delta[b] *= c;
-                delta[n + b] *= c;
-            }
-        }
+        let delta = self.shape.delta(contact, x, self.theta);
         f.iter_mut()
             .zip(&delta)
             .for_each(|(f, d)| *f = self.rho * *f + d);
@@ -145,7 +148,7 @@ mod tests {
         let cell = truth(DiscrepancyShape::PaperCell)
             .forces(&contact, x)
             .unwrap();
-        let delta = DiscrepancyShape::Paper.delta(x, &contact.gate().nu_points, 95.25);
+        let delta = DiscrepancyShape::Paper.delta(&contact, x, 95.25);
         let n = delta.len() / 2;
         for b in 0..2 * n {
             let expected = if b % n == 1 { 0.5 * delta[b] } else { 0.0 };
@@ -166,12 +169,14 @@ mod tests {
     /// component and zeroes the other, and together they are the paper's δ exactly.
     #[test]
     fn the_paper_shape_splits_into_its_components() {
-        let d = [0.0, 190.5, 381.0, 571.5, 762.0];
+        let contact = ContactParams::default()
+            .build(mitergate::testing::doc_gate())
+            .unwrap();
         let x = [700.0, 50.0];
-        let paper = DiscrepancyShape::Paper.delta(x, &d, 95.25);
-        let normal = DiscrepancyShape::PaperNormal.delta(x, &d, 95.25);
-        let tangential = DiscrepancyShape::PaperTangential.delta(x, &d, 95.25);
-        let n = d.len();
+        let paper = DiscrepancyShape::Paper.delta(&contact, x, 95.25);
+        let normal = DiscrepancyShape::PaperNormal.delta(&contact, x, 95.25);
+        let tangential = DiscrepancyShape::PaperTangential.delta(&contact, x, 95.25);
+        let n = paper.len() / 2;
         assert!(normal[n..].iter().all(|&v| v == 0.0) && tangential[..n].iter().all(|&v| v == 0.0));
         assert!(normal[..n].iter().any(|&v| v != 0.0) && tangential[n..].iter().any(|&v| v != 0.0));
         for b in 0..2 * n {
