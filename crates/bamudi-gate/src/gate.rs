@@ -2,6 +2,7 @@
 //! exactly the calibrated model, and the gate's record layout for the close loop.
 
 use crate::error::{GateAppError, Result};
+use crate::session::{ToleranceSpec, build_tolerances};
 use bamudi::closeloop::{CloseLoopConfig, IngestConfig, LoadSpec, MeasuredRecord};
 use mitergate::data::field::{FieldConfig, FieldRecord, simulate};
 use mitergate::{ContactModel, GateConfig, GateMultiLevel, GateSummary, MultiLevelSpec};
@@ -32,6 +33,10 @@ pub struct SavedModel {
     pub gap_prior: (f64, f64),
     /// Legendre terms of the discrepancy (normal, tangential).
     pub discrepancy_terms: [usize; 2],
+    /// The declared tolerances of the gate's build the calibration integrated (none in files
+    /// written before they were saved).
+    #[serde(default)]
+    pub tolerances: Vec<ToleranceSpec>,
 }
 
 impl SavedModel {
@@ -56,14 +61,33 @@ impl SavedModel {
         })
     }
 
-    /// The multi-level model (contact forces memoised, `memo_capacity` entries).
+    /// The multi-level model (contact forces memoised, `memo_capacity` entries) with the
+    /// declared tolerances the calibration integrated, rebuilt one sd either side, so that
+    /// Module 4 predicts with them.
     pub fn multilevel(&self, memo_capacity: usize) -> Result<GateMultiLevel> {
+        self.multilevel_with(memo_capacity, &self.tolerances, "the saved model")
+    }
+
+    /// As [`multilevel`](Self::multilevel), with the tolerances `specs` (errors name `label`).
+    pub(crate) fn multilevel_with(
+        &self,
+        memo_capacity: usize,
+        specs: &[ToleranceSpec],
+        label: &str,
+    ) -> Result<GateMultiLevel> {
         let spec = MultiLevelSpec {
             gap_prior_in: self.gap_prior,
             discrepancy_terms: self.discrepancy_terms,
             memo_capacity,
         };
-        Ok(mitergate::multilevel(self.contact.clone(), &spec)?)
+        let model = mitergate::multilevel(self.contact.clone(), &spec)?;
+        if specs.is_empty() {
+            return Ok(model);
+        }
+        let tolerances = build_tolerances(specs, self.gate.as_ref(), label)?;
+        model
+            .with_tolerances(tolerances)
+            .map_err(|e| GateAppError::Invalid(format!("{label}: `tolerances`: {e}")))
     }
 }
 

@@ -309,11 +309,7 @@ impl CalibrateSpec {
         memo_capacity: usize,
         label: &str,
     ) -> Result<GateMultiLevel> {
-        let tolerances = build_tolerances(&self.tolerances, saved.gate.as_ref(), label)?;
-        saved
-            .multilevel(memo_capacity)?
-            .with_tolerances(tolerances)
-            .map_err(|e| GateAppError::Invalid(format!("{label}: `tolerances`: {e}")))
+        saved.multilevel_with(memo_capacity, &self.tolerances, label)
     }
 
     /// The saved model of a calibration of `contact` (built from `gate`, `None` for a deck)
@@ -330,6 +326,7 @@ impl CalibrateSpec {
             contact,
             gap_prior: self.prior(),
             discrepancy_terms: self.discrepancy_terms,
+            tolerances: self.tolerances.clone(),
         })
     }
 }

@@ -438,6 +438,19 @@ impl Calibration {
                 "the model's matrix A differs from the calibrated one".into(),
             ));
         }
+        let declared: Vec<&str> = model.tolerances.iter().map(|t| t.name.as_str()).collect();
+        let integrated: Vec<&str> = self
+            .module3()
+            .marginal
+            .iter()
+            .flat_map(|m| m.tolerances.iter().map(|t| t.name.as_str()))
+            .collect();
+        if declared != integrated {
+            return Err(BamudiError::Calibration(format!(
+                "the model declares the build tolerances {declared:?}, the calibration \
+                 integrated {integrated:?}"
+            )));
+        }
         Ok(())
     }
 

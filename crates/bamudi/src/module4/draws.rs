@@ -8,16 +8,22 @@
 //! Gaussian given `θ_j` (the marginal mode; `ρ*` otherwise); the coefficients from their
 //! Gaussian given `θ_j` and that `ρ` — mean `μ_j + (∂μ_j/∂ρ)(ρ − ρ_j)`, covariance `Σ_α(x)`,
 //! all directions of it, also those the gauges cannot see; the response
-//! `ρ g_u(x, θ_j) + L α`. Each draw goes through the prediction model with its own `θ_j`; the
+//! `ρ g_u(x, θ_j) + L α`. With declared build tolerances (marginal mode) the deviations `η`
+//! are drawn jointly with the coefficients (mean `η̂`, covariance `M⁻¹`, and their covariance
+//! with `α`) and add `R η`, `R` the tolerances' response columns. Each draw goes through the prediction model with its own `θ_j`; the
 //! band is the draws' empirical 2.5 % and 97.5 % quantiles. Draws are seeded: the same seed
 //! gives the same band.
 
 use super::{Band, Predictor};
 use crate::error::{BamudiError, Result};
 use mlmodel::{LinearObservableModel, PredictionModel, UnobservableModel};
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 use numerics::random::standard_normal;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
+
+/// The basis the draws multiply, the covariance of what it multiplies, and the tolerances'
+/// mean deviations when they are drawn too (see [`Predictor::draws_at`]).
+type DrawBasis = (DMatrix<f64>, DMatrix<f64>, Option<DVector<f64>>);
 
 /// One joint draw of the corrected response: the `θ` it was drawn at and the response
 /// (component blocked, length `C N_u`).
@@ -79,7 +85,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             })
             .collect();
         let total = cumulative.last().copied().unwrap_or(0.0);
-        let n_coef = self.basis().0.ncols();
+        let n_coef = self.basis().0.ncols() + self.n_tolerances();
         let mut rng = StdRng::seed_from_u64(seed);
         let mut paths = DrawPaths {
             picks: Vec::with_capacity(n),
@@ -104,15 +110,15 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// use.
     pub fn draws_at(&self, paths: &DrawPaths, x: &[f64]) -> Result<Vec<ResponseDraw>> {
         let at = self.coef_at(x)?;
-        let l = self.basis().0;
-        let factor = match at.cov.iter().any(|v| *v != 0.0) {
-            true => Some(covariance_factor(&at.cov, x)?),
+        let (basis, cov, eta) = self.draw_basis(x, &at)?;
+        let factor = match cov.iter().any(|v| *v != 0.0) {
+            true => Some(covariance_factor(&cov, x)?),
             false => None,
         };
         let mut responses: Vec<Option<DVector<f64>>> = vec![None; self.support.len()];
         for &j in &paths.picks {
             if responses[j].is_none() {
-                let mut g = vec![0.0; l.nrows()];
+                let mut g = vec![0.0; basis.nrows()];
                 self.model
                     .unobservable
                     .evaluate(x, &self.support[j].0, &mut g)?;
@@ -124,19 +130,47 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 let j = paths.picks[k];
                 let (rho_j, rho_var) = at.rho[j];
                 let rho = rho_j + rho_var.max(0.0).sqrt() * paths.rho_z[k];
-                let mut alpha = &at.mean[j] + &at.slope[j] * (rho - rho_j);
+                let alpha = &at.mean[j] + &at.slope[j] * (rho - rho_j);
+                let mut z = match &eta {
+                    Some(eta) => DVector::from_iterator(
+                        basis.ncols(),
+                        alpha.iter().chain(eta.iter()).copied(),
+                    ),
+                    None => alpha,
+                };
                 if let Some(f) = &factor {
-                    alpha += f * &paths.alpha_z[k];
+                    z += f * paths.alpha_z[k].rows(0, z.len());
                 }
                 let g = responses[j].as_ref().ok_or_else(|| {
                     BamudiError::config("draws", "a draw's support point was not evaluated")
                 })?;
                 Ok(ResponseDraw {
                     theta: self.support[j].0.clone(),
-                    response: (g * rho + l * alpha).iter().copied().collect(),
+                    response: (g * rho + &basis * z).iter().copied().collect(),
                 })
             })
             .collect()
+    }
+
+    /// What the draws at `x` multiply: the basis `L` and the coefficients' covariance, or, with
+    /// declared tolerances, `[L R]` and the joint covariance of `(α, η)` with `η̂`.
+    fn draw_basis(&self, x: &[f64], at: &super::CoefAt) -> Result<DrawBasis> {
+        let l = self.basis().0;
+        let (Some(t), Some(cols)) = (&at.tolerance, self.tolerance_columns(x, at)?) else {
+            return Ok((l.clone(), at.cov.clone(), None));
+        };
+        let (k, p) = (l.ncols(), t.mean.len());
+        let basis = DMatrix::from_fn(l.nrows(), k + p, |r, c| match c < k {
+            true => l[(r, c)],
+            false => cols.response[(r, c - k)],
+        });
+        let cov = DMatrix::from_fn(k + p, k + p, |a, b| match (a < k, b < k) {
+            (true, true) => at.cov[(a, b)],
+            (true, false) => t.cross[(a, b - k)],
+            (false, true) => t.cross[(b, a - k)],
+            (false, false) => t.cov[(a - k, b - k)],
+        });
+        Ok((basis, cov, Some(t.mean.clone())))
     }
 
     /// The prediction model's outputs at `x` with 95 % bands: `n_draws` joint draws of the

@@ -12,7 +12,14 @@
 //!
 //! with `μ_α`, `Σ_α` the coefficient GPs' latent means and variances (independent GPs, so
 //! `Σ_α` is diagonal), shifted in the conditional mode by the posterior-averaged coefficient
-//! change ([`crate::module3::Module3::alpha_correction`]). Where the unobservable response
+//! change ([`crate::module3::Module3::alpha_correction`]).
+//!
+//! With declared build tolerances (marginal mode; [`crate::module3::marginal::nuisance`]) the
+//! deviations `η` enter every prediction as they entered the data: each component's mean gains
+//! `J(x) η̂` (outputs) or `R(x) η̂` (response, `R = ρ (g⁺ − g⁻) / 2`), its variance
+//! `diag(J M⁻¹ Jᵀ) + 2 diag(B C Jᵀ)` (with `L`, `R` for the response), `M⁻¹ = Var(η | y)` and
+//! `C = Cov(α(x), η | y)`. Like Module 3, the columns are taken at the posterior mode `θ̄` for
+//! every support point and `η̂` is Module 3's posterior mean there. Where the unobservable response
 //! vanishes ([`mlmodel::UnobservableModel::response_vanishes`], e.g. a gate with no head) the
 //! discrepancy, which corrects that response, is zero.
 
@@ -22,6 +29,7 @@ pub use draws::{DrawPaths, ResponseDraw, empirical_band};
 
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
+use crate::module3::marginal::nuisance::{ToleranceColumns, columns_at};
 use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState};
 use crate::module3::posterior::SupportPolicy;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
@@ -64,6 +72,17 @@ struct CoefAt {
     slope: Vec<DVector<f64>>,
     rho: Vec<(f64, f64)>,
     cov: DMatrix<f64>,
+    /// The declared tolerances' deviations (marginal mode; `None` when none were declared).
+    tolerance: Option<ToleranceAt>,
+}
+
+/// The declared tolerances' deviations `η` given the data: mean (`P`; Module 3's, at the
+/// posterior mode `θ̄`), covariance `M⁻¹` (`P x P`) and covariance with the coefficients at the
+/// input (`K x P`, [`MarginalState::tolerance_cross`]).
+struct ToleranceAt {
+    mean: DVector<f64>,
+    cov: DMatrix<f64>,
+    cross: DMatrix<f64>,
 }
 
 impl Calibration {
@@ -138,9 +157,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// The corrected distributed response at `x` (Eq. 52; component blocked, length `C N_u`).
     pub fn response(&self, x: &[f64]) -> Result<Band> {
         let at = self.coef_at(x)?;
+        let cols = self.tolerance_columns(x, &at)?;
         let l = self.basis().0;
         let mut g = vec![0.0; l.nrows()];
-        self.mixture(&at, l, |theta| {
+        self.mixture(&at, l, cols.as_ref().map(|c| &c.response), |theta| {
             self.model.unobservable.evaluate(x, theta, &mut g)?;
             Ok((DVector::from_column_slice(&g), DVector::zeros(g.len())))
         })
@@ -149,7 +169,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// The noise-free observable outputs at `x` (Eq. 44); add `σ_ε²` for a new measurement.
     pub fn outputs(&self, x: &[f64]) -> Result<Band> {
         let at = self.coef_at(x)?;
-        self.mixture(&at, self.basis().1, |theta| self.model_parts(x, theta))
+        let cols = self.tolerance_columns(x, &at)?;
+        let tol = cols.as_ref().map(|c| &c.observed);
+        self.mixture(&at, self.basis().1, tol, |theta| self.model_parts(x, theta))
     }
 
     /// The reconstructed discrepancy `L μ_α(x)` (posterior-averaged in the marginal mode) with
@@ -196,7 +218,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             .map(|i| {
                 let xi: Vec<f64> = x.row(i).iter().copied().collect();
                 let at = self.coef_at(&xi)?;
-                let comps = self.components(&at, bm, |theta| self.model_parts(&xi, theta))?;
+                let cols = self.tolerance_columns(&xi, &at)?;
+                let tol = cols.as_ref().map(|c| &c.observed);
+                let comps = self.components(&at, bm, tol, |theta| self.model_parts(&xi, theta))?;
                 Ok(mixture_moments(&comps, &self.weights()))
             })
             .collect::<Result<Vec<_>>>()?;
@@ -225,7 +249,8 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             .map(|i| {
                 let xi: Vec<f64> = x.row(i).iter().copied().collect();
                 let (ag, off) = self.model_parts(&xi, &theta[i])?;
-                Ok(ag * rho + off + bm * mu.row(i).transpose())
+                let shift = self.tolerance_output_shift(&xi)?;
+                Ok(ag * rho + off + bm * mu.row(i).transpose() + shift)
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(DMatrix::from_fn(x.nrows(), bm.nrows(), |i, q| rows[i][q]))
@@ -243,13 +268,17 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         let bm = self.basis().1;
         let rho = self.cal.rho_star();
         let n = x.nrows();
+        let shifts = (0..n)
+            .into_par_iter()
+            .map(|i| self.tolerance_output_shift(&x.row(i).iter().copied().collect::<Vec<_>>()))
+            .collect::<Result<Vec<_>>>()?;
         let cells = (0..n * thetas.len())
             .into_par_iter()
             .map(|k| {
                 let (j, i) = (k / n, k % n);
                 let xi: Vec<f64> = x.row(i).iter().copied().collect();
                 let (ag, off) = self.model_parts(&xi, &thetas[j])?;
-                Ok(ag * rho + off + bm * mu.row(i).transpose())
+                Ok(ag * rho + off + bm * mu.row(i).transpose() + &shifts[i])
             })
             .collect::<Result<Vec<_>>>()?;
         Ok((0..thetas.len())
@@ -286,6 +315,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                     rho: vec![(self.cal.rho_star(), 0.0); n],
                     cov: DMatrix::from_diagonal(&var.row(0).transpose()),
                     mean: vec![mean; n],
+                    tolerance: None,
                 }
             }
             Some(view) => self.marginal_coef_at(view, x)?,
@@ -296,6 +326,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 .chain(at.slope.iter_mut())
                 .for_each(|m| m.fill(0.0));
             at.cov.fill(0.0);
+            if let Some(t) = &mut at.tolerance {
+                t.cross.fill(0.0);
+            }
         }
         Ok(at)
     }
@@ -311,12 +344,53 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             rho.push((node.rho_mean, node.rho_var));
         }
         let cov = view.state.coefficient_cov(view.fit, x, &ax, &cmat);
+        let tolerance = match view.state.tolerance_cross(view.fit, &cmat) {
+            None => None,
+            Some((cross, m_inv)) => Some(ToleranceAt {
+                mean: tolerance_means(view.fit, m_inv.nrows())?,
+                cov: m_inv.clone(),
+                cross,
+            }),
+        };
         Ok(CoefAt {
             mean,
             slope,
             rho,
             cov,
+            tolerance,
         })
+    }
+
+    /// The declared tolerances' columns at `x` when `at` carries tolerances: taken, as
+    /// Module 3 took them, at the posterior mode `θ̄` (and here `ρ`'s posterior mean) for
+    /// every support point.
+    fn tolerance_columns(&self, x: &[f64], at: &CoefAt) -> Result<Option<ToleranceColumns>> {
+        let (Some(view), Some(_)) = (&self.marginal, &at.tolerance) else {
+            return Ok(None);
+        };
+        let (theta, rho) = (&view.fit.support_theta, view.fit.rho_mean);
+        Ok(Some(columns_at(self.model, x, theta, rho)?))
+    }
+
+    /// The number of declared tolerances the predictions carry (marginal mode).
+    fn n_tolerances(&self) -> usize {
+        self.marginal.as_ref().map_or(0, |v| v.fit.tolerances.len())
+    }
+
+    /// `J(x) η̂`: the declared tolerances' mean contribution to the outputs at `x` (zero
+    /// without tolerances).
+    fn tolerance_output_shift(&self, x: &[f64]) -> Result<DVector<f64>> {
+        let n_o = self.basis().1.nrows();
+        let Some(view) = self
+            .marginal
+            .as_ref()
+            .filter(|v| !v.fit.tolerances.is_empty())
+        else {
+            return Ok(DVector::zeros(n_o));
+        };
+        let eta = tolerance_means(view.fit, view.fit.tolerances.len())?;
+        let (theta, rho) = (&view.fit.support_theta, view.fit.rho_mean);
+        Ok(columns_at(self.model, x, theta, rho)?.observed * eta)
     }
 
     /// The coefficients' prior scales `a_k(x)` of the marginal mode, by the rule Module 3 used
@@ -378,16 +452,25 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         &self,
         at: &CoefAt,
         m: &DMatrix<f64>,
+        tol: Option<&DMatrix<f64>>,
         mut parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
     ) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
-        let gauss_var = projected_variance(m, &at.cov);
+        let mut gauss_var = projected_variance(m, &at.cov);
+        let mut tol_mean = DVector::zeros(m.nrows());
+        if let Some((mean, var)) = tolerance_moments(at, m, tol) {
+            tol_mean = mean;
+            for (g, v) in gauss_var.iter_mut().zip(var) {
+                // a joint Gaussian's marginal variance: non-negative up to rounding
+                *g = (*g + v).max(0.0);
+            }
+        }
         self.support
             .iter()
             .enumerate()
             .map(|(j, (theta, _))| {
                 let (u, v) = parts(theta)?;
                 let (rho, rho_var) = at.rho[j];
-                let shift = m * &at.mean[j];
+                let shift = m * &at.mean[j] + &tol_mean;
                 let slope = &u + m * &at.slope[j];
                 let mean = (0..u.len()).map(|q| rho * u[q] + v[q] + shift[q]).collect();
                 let var = (0..u.len())
@@ -403,9 +486,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         &self,
         at: &CoefAt,
         m: &DMatrix<f64>,
+        tol: Option<&DMatrix<f64>>,
         parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
     ) -> Result<Band> {
-        let comps = self.components(at, m, parts)?;
+        let comps = self.components(at, m, tol, parts)?;
         Ok(mixture_band(&comps, &self.weights()))
     }
 
@@ -420,6 +504,38 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         }
         Ok(())
     }
+}
+
+/// The means `η̂` of the `p` declared tolerances of `fit` (Module 3's posterior at `θ̄`).
+fn tolerance_means(fit: &MarginalFit, p: usize) -> Result<DVector<f64>> {
+    if fit.tolerances.len() != p {
+        return Err(BamudiError::dim(
+            "tolerance estimates vs tolerance columns of the marginal fit",
+            p,
+            fit.tolerances.len(),
+        ));
+    }
+    Ok(DVector::from_iterator(
+        p,
+        fit.tolerances.iter().map(|t| t.mean),
+    ))
+}
+
+/// What the declared tolerances add to every mixture component through their columns `cols`
+/// in `m`'s space (outputs or response): mean `cols η̂`, variance
+/// `diag(cols M⁻¹ colsᵀ) + 2 diag(m C colsᵀ)` with `C = Cov(α, η | y)`; `None` without.
+fn tolerance_moments(
+    at: &CoefAt,
+    m: &DMatrix<f64>,
+    cols: Option<&DMatrix<f64>>,
+) -> Option<(DVector<f64>, Vec<f64>)> {
+    let (t, cols) = (at.tolerance.as_ref()?, cols?);
+    let own = cols * &t.cov;
+    let cross = m * &t.cross;
+    let var = (0..cols.nrows())
+        .map(|q| own.row(q).dot(&cols.row(q)) + 2.0 * cross.row(q).dot(&cols.row(q)))
+        .collect();
+    Some((cols * &t.mean, var))
 }
 
 /// `diag(m Σ mᵀ)`: the variance of `m α` for coefficients of covariance `Σ`.

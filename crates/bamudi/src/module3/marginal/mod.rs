@@ -1126,7 +1126,8 @@ mod tests {
     /// Module 4's coefficient covariance with declared tolerances,
     /// `s P − s² Cy V'⁻¹ Cyᵀ` from the stored fit, equals the dense computation with
     /// `V' = V + J Jᵀ`; without the Woodbury term it would not (the test's `J` moves it by
-    /// O(1) of the prior).
+    /// O(1) of the prior). So do the tolerances' covariance with the coefficients and their
+    /// own posterior variance.
     #[test]
     fn module4_coefficient_covariance_carries_the_tolerances() {
         let n_e = 8;
@@ -1185,6 +1186,17 @@ mod tests {
             (&ours - &dense).amax() < 1e-8 * dense.amax().max(1.0),
             "{ours} vs {dense}"
         );
+        // the tolerances' posterior with the coefficients (Module 4's predictions):
+        // Cov(α, η | y) = −Cy V'⁻¹ J and Var(η | y) = I − Jᵀ V'⁻¹ J, densely
+        let (cross, m_inv) = state.tolerance_cross(&fit, &cmat).unwrap();
+        let v_j = inv.solve(&j).unwrap();
+        let dense_cross = -(&cy * &v_j);
+        let dense_var = DMatrix::identity(2, 2) - j.transpose() * &v_j;
+        assert!(
+            (&cross - &dense_cross).amax() < 1e-8 * dense_cross.amax().max(1.0),
+            "{cross} vs {dense_cross}"
+        );
+        assert!((m_inv - &dense_var).amax() < 1e-8, "{m_inv} vs {dense_var}");
     }
 
     #[test]

@@ -20,7 +20,7 @@
 use super::lowrank::{LowRank, Spectrum};
 use crate::error::{BamudiError, Result};
 use crate::module2::Problem;
-use mlmodel::{LinearObservableModel, UnobservableModel};
+use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use numerics::Cholesky;
 use rayon::prelude::*;
@@ -142,26 +142,61 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let n_u = p.model.unobservable.response_len();
+    Ok(columns_at(p.model, x, theta, rho)?.observed)
+}
+
+/// The declared tolerances' columns at one input: what one standard deviation of each
+/// deviation adds to the outputs and to the distributed response.
+#[derive(Debug, Clone)]
+pub(crate) struct ToleranceColumns {
+    /// `J_p = [ρ (A_p⁺ g_p⁺ − A_p⁻ g_p⁻) + b_p⁺ − b_p⁻] / 2` (`N_o x P`, output units).
+    pub(crate) observed: DMatrix<f64>,
+    /// `ρ (g_p⁺ − g_p⁻) / 2` (`C N_u x P`, response units; zero for a tolerance that leaves
+    /// the unobservable model alone).
+    pub(crate) response: DMatrix<f64>,
+}
+
+/// [`ToleranceColumns`] of `model`'s declared tolerances at `x`, `θ` and `ρ`.
+pub(crate) fn columns_at<U, O>(
+    model: &MultiLevelModel<U, O>,
+    x: &[f64],
+    theta: &[f64],
+    rho: f64,
+) -> Result<ToleranceColumns>
+where
+    U: UnobservableModel,
+    O: LinearObservableModel,
+{
+    let n_u = model.unobservable.response_len();
+    let n_o = model.observable.matrix().nrows();
     let response = |u: &U| -> Result<DVector<f64>> {
         let mut g = vec![0.0; n_u];
         u.evaluate(x, theta, &mut g)?;
         Ok(DVector::from_vec(g))
     };
-    let nominal = response(&p.model.unobservable)?;
+    let nominal = match model.tolerances.iter().any(|t| t.responses.is_none()) {
+        true => response(&model.unobservable)?,
+        // unused: every tolerance brings its own responses
+        false => DVector::zeros(n_u),
+    };
     let observed = |o: &O, g: &DVector<f64>| -> Result<DVector<f64>> {
-        let mut b = vec![0.0; p.exps.y.ncols()];
+        let mut b = vec![0.0; n_o];
         o.offset(x, theta, &mut b)?;
         Ok(o.matrix() * g * rho + DVector::from_vec(b))
     };
-    let mut out = DMatrix::zeros(p.exps.y.ncols(), p.model.tolerances.len());
-    for (c, t) in p.model.tolerances.iter().enumerate() {
+    let p = model.tolerances.len();
+    let mut out = ToleranceColumns {
+        observed: DMatrix::zeros(n_o, p),
+        response: DMatrix::zeros(n_u, p),
+    };
+    for (c, t) in model.tolerances.iter().enumerate() {
         let (g_lo, g_hi) = match &t.responses {
             Some((lo, hi)) => (response(lo)?, response(hi)?),
             None => (nominal.clone(), nominal.clone()),
         };
         let col = (observed(&t.high, &g_hi)? - observed(&t.low, &g_lo)?) * 0.5;
-        out.set_column(c, &col);
+        out.observed.set_column(c, &col);
+        out.response.set_column(c, &((&g_hi - &g_lo) * (0.5 * rho)));
     }
     Ok(out)
 }

@@ -91,9 +91,7 @@ impl MarginalState {
         let mut q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
         if let Some((per_coef, m_inv)) = &self.tolerance_terms {
             // Woodbury: Cy V'⁻¹ Cyᵀ = Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = Cy V⁻¹ J (per unit s)
-            let d = DMatrix::from_fn(k, per_coef.len(), |c, p| {
-                cmat.column(c).dot(&per_coef[p].column(c))
-            });
+            let d = cy_vinv_j(per_coef, cmat);
             q -= &d * m_inv * d.transpose();
         }
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
@@ -102,6 +100,28 @@ impl MarginalState {
         });
         prior * s - q * (s * s)
     }
+
+    /// With declared tolerances, their deviations' joint posterior with the coefficients at
+    /// `x` (from `cmat` of [`MarginalFit::cross_cov`]): `Cov(α(x), η | y) = −s Cy V'⁻¹ J =
+    /// −s (Cy V⁻¹ J) M⁻¹` (`K x P`; the prior has no covariance between the two) and
+    /// `Var(η | y) = M⁻¹` (`P x P`). `None` when none were declared.
+    pub fn tolerance_cross(
+        &self,
+        fit: &MarginalFit,
+        cmat: &DMatrix<f64>,
+    ) -> Option<(DMatrix<f64>, &DMatrix<f64>)> {
+        let (per_coef, m_inv) = self.tolerance_terms.as_ref()?;
+        let d = cy_vinv_j(per_coef, cmat);
+        Some(((d * m_inv) * (-fit.amplitude), m_inv))
+    }
+}
+
+/// `Cy V⁻¹ J` per unit amplitude (`K x P`): coefficient `c` against tolerance `p` is
+/// `Σ_i C_c(x, x_i) [(I ⊗ b_cᵀ) V⁻¹ J_p]_i`.
+fn cy_vinv_j(per_coef: &[DMatrix<f64>], cmat: &DMatrix<f64>) -> DMatrix<f64> {
+    DMatrix::from_fn(cmat.ncols(), per_coef.len(), |c, p| {
+        cmat.column(c).dot(&per_coef[p].column(c))
+    })
 }
 
 impl MarginalFit {
