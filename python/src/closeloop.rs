@@ -8,6 +8,7 @@ use crate::{invalid, to_py};
 use bamudi::closeloop::{CloseLoopConfig, MissingPolicy, close_loop as run_loop};
 use bamudi::observe::Observer;
 use bamudi_gate::gate;
+use bamudi_gate::session::ToleranceSpec;
 use pyo3::prelude::*;
 use std::sync::Arc;
 
@@ -15,12 +16,13 @@ use std::sync::Arc;
 /// gauges, covariates; `label` names it in messages). Settings as on the command line:
 /// `config_toml` (a close-loop configuration), `holdout_fraction`, `test_fraction`,
 /// `impute`, `gap_prior` (in), `max_experiments`, `gauge_noise_sd` (microstrain),
-/// `calibration_toml` (the `[calibration]` keys), `seed`.
+/// `calibration_toml` (the `[calibration]` keys), `seed`; `tolerances_json`, the declared
+/// build tolerances (`[{"key", "relative_sd"}]`, as `--tolerances`).
 #[pyfunction]
 #[pyo3(signature = (gate, csv, label="record".to_string(), gap_prior=(40.0, 200.0),
                     max_experiments=240, gauge_noise_sd=None, config_toml=None,
                     calibration_toml=None, holdout_fraction=None, test_fraction=None,
-                    impute=false, seed=None, progress=None))]
+                    impute=false, seed=None, progress=None, tolerances_json=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn close_loop(
     py: Python<'_>,
@@ -37,6 +39,7 @@ pub fn close_loop(
     impute: bool,
     seed: Option<u64>,
     progress: Option<Py<PyAny>>,
+    tolerances_json: Option<String>,
 ) -> PyResult<String> {
     let (lo, hi) = gap_prior;
     let top = gate.contact.gate().quoin_height;
@@ -56,18 +59,30 @@ pub fn close_loop(
         .map(|t| bamudi::CalibrationConfig::from_toml_str(&t))
         .transpose()
         .map_err(|e| invalid(format!("calibration_toml: {e}")))?;
+    let tolerances: Vec<ToleranceSpec> = match &tolerances_json {
+        Some(t) => serde_json::from_str(t).map_err(|e| invalid(format!("tolerances: {e}")))?,
+        None => Vec::new(),
+    };
+    if !tolerances.is_empty() && gate.config().is_none() {
+        return Err(invalid(
+            "tolerances need a gate configuration, not an imported deck",
+        ));
+    }
     let observer: Arc<dyn Observer + Send + Sync> = Arc::new(Callback::new(progress));
-    let contact = gate.contact.clone();
+    let (contact, drawing) = (gate.contact.clone(), gate.config().cloned());
     py.detach(|| {
-        let calibrator = bamudi_gate::session::gate_calibrator(
+        let mut calibrator = bamudi_gate::session::gate_calibrator(
             contact,
             (lo, hi),
             max_experiments,
             gauge_noise_sd,
             cal_cfg,
             seed,
-        )?
-        .observer(observer);
+        )?;
+        if let Some(drawing) = drawing.as_ref().filter(|_| !tolerances.is_empty()) {
+            calibrator = calibrator.tolerances(&tolerances, drawing)?;
+        }
+        let calibrator = calibrator.observer(observer);
         let model = calibrator.model();
         let mut ingest = gate::ingest_config(model);
         if impute {

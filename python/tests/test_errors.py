@@ -99,6 +99,12 @@ def test_close_loop_errors(gate, tmp_path):
     expect("max_experiments must be in [10, 100000]", bamudi.close_loop, gate, rec, max_experiments=5)
     expect("holdout_fraction must be in (0, 1)", bamudi.close_loop, gate, rec, holdout_fraction=1.5)
     expect("too few rows", bamudi.close_loop, gate, rec)
+    # declared tolerances are checked before the record is read
+    colour = [{"key": "skin_plate.colour", "relative_sd": 0.03}]
+    expect("tolerances[0].key", bamudi.close_loop, gate, rec, tolerances=colour)
+    wide = [{"key": "skin_plate.thickness", "relative_sd": 0.9}]
+    expect("tolerances[0].relative_sd", bamudi.close_loop, gate, rec, tolerances=wide)
+    expect("tolerances", bamudi.close_loop, gate, rec, tolerances=[{"key": "skin_plate.thickness"}])
     bad = tmp_path / "r.csv"
     bad.write_text(rec.csv.replace("h_down", "h_low"))
     expect("h_down", bamudi.close_loop, gate, bad)

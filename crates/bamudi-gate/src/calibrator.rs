@@ -35,13 +35,16 @@
 //! loop would then try to explain.
 
 use crate::error::{GateAppError, Result};
+use crate::session::{
+    ToleranceSpec, build_tolerances, check_tolerance_keys, check_tolerance_specs,
+};
 use bamudi::closeloop::{CalibratedModel, Calibrator, ThetaSummary};
 use bamudi::observe::Observer;
 use bamudi::{
     BamudiError, Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode,
     EstimatorParams, Experiments, SupportPolicy,
 };
-use mitergate::{ContactModel, GateMultiLevel, MultiLevelSpec};
+use mitergate::{ContactModel, GateConfig, GateMultiLevel, MultiLevelSpec};
 use mlmodel::{ObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
 use std::sync::Arc;
@@ -90,6 +93,29 @@ impl GateCalibrator {
     pub fn config(mut self, config: CalibrationConfig) -> Self {
         self.config = config;
         self
+    }
+
+    /// Declares tolerances of the gate's build (`drawing`: the configuration the calibrator's
+    /// contact model was built from): every calibration of the loop integrates them out and
+    /// every prediction carries the deviation the data read (Module 4), so the loop's residuals
+    /// do not show an as-built gate as a missing effect. Needs the marginal coefficient mode
+    /// (the default; set the configuration first). Errors name `tolerances[i]` and its key or
+    /// sd.
+    pub fn tolerances(mut self, specs: &[ToleranceSpec], drawing: &GateConfig) -> Result<Self> {
+        let label = "close-loop tolerances";
+        check_tolerance_specs(specs, self.config.coefficients, label)?;
+        check_tolerance_keys(specs, drawing, label)?;
+        let built = build_tolerances(specs, Some(drawing), label)?;
+        let model = Arc::try_unwrap(self.model).map_err(|_| {
+            GateAppError::Invalid(format!(
+                "{label}: declare them before the calibrator's model is shared"
+            ))
+        })?;
+        let model = model
+            .with_tolerances(built)
+            .map_err(|e| GateAppError::Invalid(format!("{label}: {e}")))?;
+        self.model = Arc::new(model);
+        Ok(self)
     }
 
     /// Reports every calibration's stages to `observer` (e.g. progress bars).

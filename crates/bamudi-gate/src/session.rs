@@ -136,6 +136,58 @@ pub struct ToleranceSpec {
     pub relative_sd: f64,
 }
 
+/// Checks declared tolerances without a gate: every relative sd in `(0, 0.5]`, no key declared
+/// twice, and the marginal coefficient `mode` (the only one that integrates them). Errors name
+/// `label` and `tolerances[i]`.
+pub fn check_tolerance_specs(
+    specs: &[ToleranceSpec],
+    mode: bamudi::CoefficientMode,
+    label: &str,
+) -> Result<()> {
+    for (i, t) in specs.iter().enumerate() {
+        if !(t.relative_sd.is_finite() && t.relative_sd > 0.0 && t.relative_sd <= 0.5) {
+            return Err(GateAppError::Invalid(format!(
+                "{label}: tolerances[{i}].relative_sd must lie in (0, 0.5], got {}",
+                t.relative_sd
+            )));
+        }
+    }
+    if let Some((i, t)) = specs
+        .iter()
+        .enumerate()
+        .find(|(i, t)| specs[..*i].iter().any(|o| o.key == t.key))
+    {
+        return Err(GateAppError::Invalid(format!(
+            "{label}: tolerances[{i}].key {:?} is declared twice (its variance would count twice)",
+            t.key
+        )));
+    }
+    if !specs.is_empty() && mode != bamudi::CoefficientMode::Marginal {
+        return Err(GateAppError::Invalid(format!(
+            "{label}: `tolerances` are integrated only by the marginal mode; remove them or set \
+             coefficients = \"marginal\" in [calibration]"
+        )));
+    }
+    Ok(())
+}
+
+/// Checks every declared tolerance against the drawing `gate`: the key names a numeric field,
+/// and the gate stays valid one standard deviation either side. Errors name `label` and
+/// `tolerances[i].key` or `.relative_sd`.
+pub fn check_tolerance_keys(specs: &[ToleranceSpec], gate: &GateConfig, label: &str) -> Result<()> {
+    for (i, t) in specs.iter().enumerate() {
+        // the drawing itself is valid: a failure at x 1 is the key's
+        Reality::scaled_field(gate, &t.key, 1.0)
+            .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
+        for factor in [1.0 - t.relative_sd, 1.0 + t.relative_sd] {
+            Reality::scaled_field(gate, &t.key, factor).map_err(|e| {
+                GateAppError::Invalid(format!("{label}: tolerances[{i}].relative_sd: {e}"))
+            })?;
+        }
+    }
+    Ok(())
+}
+
 /// The gate's models (strains and contact forces) rebuilt at one standard deviation either
 /// side of each declared tolerance of `drawing`; errors name `label`, the tolerance's index
 /// and key.
@@ -235,34 +287,7 @@ impl CalibrateSpec {
                 self.discrepancy_terms
             )));
         }
-        for (i, t) in self.tolerances.iter().enumerate() {
-            if !(t.relative_sd.is_finite() && t.relative_sd > 0.0 && t.relative_sd <= 0.5) {
-                return Err(GateAppError::Invalid(format!(
-                    "{label}: tolerances[{i}].relative_sd must lie in (0, 0.5], got {}",
-                    t.relative_sd
-                )));
-            }
-        }
-        if let Some((i, t)) = self
-            .tolerances
-            .iter()
-            .enumerate()
-            .find(|(i, t)| self.tolerances[..*i].iter().any(|o| o.key == t.key))
-        {
-            return Err(GateAppError::Invalid(format!(
-                "{label}: tolerances[{i}].key {:?} is declared twice (its variance would count \
-                 twice)",
-                t.key
-            )));
-        }
-        if !self.tolerances.is_empty()
-            && self.calibration.coefficients != bamudi::CoefficientMode::Marginal
-        {
-            return Err(GateAppError::Invalid(format!(
-                "{label}: `tolerances` are integrated only by the marginal mode; remove them \
-                 or set coefficients = \"marginal\" in [calibration]"
-            )));
-        }
+        check_tolerance_specs(&self.tolerances, self.calibration.coefficients, label)?;
         if let Err(e) = self.calibration.clone().check() {
             return Err(GateAppError::Invalid(format!(
                 "{label}: in table [calibration]: {e}"
@@ -287,17 +312,7 @@ impl CalibrateSpec {
     /// field, and the gate stays valid one standard deviation either side) before anything is
     /// built.
     pub fn check_tolerances(&self, label: &str, gate: &GateConfig) -> Result<()> {
-        for (i, t) in self.tolerances.iter().enumerate() {
-            // the drawing itself is valid: a failure at x 1 is the key's
-            Reality::scaled_field(gate, &t.key, 1.0)
-                .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
-            for factor in [1.0 - t.relative_sd, 1.0 + t.relative_sd] {
-                Reality::scaled_field(gate, &t.key, factor).map_err(|e| {
-                    GateAppError::Invalid(format!("{label}: tolerances[{i}].relative_sd: {e}"))
-                })?;
-            }
-        }
-        Ok(())
+        check_tolerance_keys(&self.tolerances, gate, label)
     }
 
     /// The gate's multi-level model of `saved` (contact forces memoised, `memo_capacity`

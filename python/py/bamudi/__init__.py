@@ -313,10 +313,13 @@ def close_loop(
     impute: bool = False,
     seed: Optional[int] = None,
     progress: Optional[Progress] = None,
+    tolerances: Optional[list] = None,
 ) -> dict:
     """Closes the loop on a field record (:class:`FieldRecord`, or the path of a field CSV):
     finds, adds and reports the effects the calibration misses, as ``bamudi close-loop``.
-    ``config`` and ``calibration_config`` are TOML texts or file paths. Returns the loop's
+    ``config`` and ``calibration_config`` are TOML texts or file paths; ``tolerances`` the
+    declared build tolerances (``[{"key": ..., "relative_sd": ...}]``, as in ``calibrate``),
+    which every calibration of the loop integrates out. Returns the loop's
     report as a dict: the command line's ``results.json`` without its ``record_fatigue`` part
     (the quoin block's fatigue over the record)."""
     if isinstance(record, FieldRecord):
@@ -329,6 +332,7 @@ def close_loop(
         gauge_noise_sd=gauge_noise_sd, config_toml=_text(config, "config"),
         calibration_toml=_text(calibration_config, "calibration_config"), holdout_fraction=holdout_fraction,
         test_fraction=test_fraction, impute=impute, seed=seed, progress=progress,
+        tolerances_json=None if tolerances is None else json.dumps(tolerances),
     )
     return json.loads(text)
 

@@ -2,11 +2,11 @@
 //! calibrator of the gate.
 use super::{GateArgs, build_gate, gate_source};
 use anyhow::{Context, Result};
-use bamudi::CalibrationConfig;
 use bamudi::closeloop::{
     CloseLoopConfig, CloseLoopOutcome, CloseLoopReport, MeasuredRecord, MissingPolicy, close_loop,
 };
 use bamudi::observe::Observer;
+use bamudi::{CalibrationConfig, CoefficientMode};
 use bamudi_gate::calibrator::{CalibratedGate, GateCalibrator};
 use bamudi_gate::gate;
 use bamudi_gate::output::StagedDir;
@@ -14,6 +14,7 @@ use bamudi_gate::progress::Bars;
 use bamudi_gate::record_fatigue::{self, RecordFatigue, RecordFatigueOptions, record_fatigue};
 use bamudi_gate::report::calibration::ReportInputs;
 use bamudi_gate::session::GateSource;
+use bamudi_gate::session::{ToleranceSpec, check_tolerance_keys, check_tolerance_specs};
 use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::UnobservableModel;
 use std::path::PathBuf;
@@ -65,6 +66,19 @@ pub struct CloseLoopCmd {
     /// grid points, σ_ε estimated; its `sampling.noise_sd` is replaced by the gauge noise).
     #[arg(long)]
     calibration_config: Option<PathBuf>,
+    /// Optional TOML file of declared build tolerances (`[[tolerances]]` with `key` and
+    /// `relative_sd`, as in the `calibrate` configuration): every calibration of the loop
+    /// integrates them out and its predictions carry the deviation the data read, so an
+    /// as-built gate is not reported as a missing effect (marginal mode; a configured gate).
+    #[arg(long)]
+    tolerances: Option<PathBuf>,
+}
+
+/// The `--tolerances` file.
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToleranceFile {
+    tolerances: Vec<ToleranceSpec>,
 }
 
 /// Runs `close-loop`.
@@ -93,6 +107,7 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     let cfg = loop_config(c)?;
     let cal_cfg = calibration_config(c)?;
     let source = gate_source(gate_args)?;
+    let tolerances = read_tolerances(c, &source, cal_cfg.as_ref())?;
     if let GateSource::Config(cfg) = &source {
         check_prior_below(lo, hi, cfg.geometry.quoin_height)?;
     }
@@ -101,7 +116,13 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     let contact = built.contact;
     check_prior_below(lo, hi, contact.gate().quoin_height)?;
     let bars: Arc<dyn Observer + Send + Sync> = Arc::new(Bars::new());
-    let calibrator = calibrator(c, cal_cfg, contact, (lo, hi), seed)?.observer(bars);
+    let mut calibrator = calibrator(c, cal_cfg, contact, (lo, hi), seed)?;
+    if let (Some(drawing), false) = (built.config.as_ref(), tolerances.is_empty()) {
+        calibrator = calibrator
+            .tolerances(&tolerances, drawing)
+            .context("--tolerances")?;
+    }
+    let calibrator = calibrator.observer(bars);
     let model = calibrator.model();
     let mut ingest = gate::ingest_config(model);
     if c.impute {
@@ -215,6 +236,32 @@ fn calibration_config(c: &CloseLoopCmd) -> Result<Option<CalibrationConfig>> {
     let cfg = CalibrationConfig::from_toml_str(&text)
         .with_context(|| format!("--calibration-config {}", p.display()))?;
     Ok(Some(cfg))
+}
+
+/// The `--tolerances` file, read and checked before the gate is built: the relative sds,
+/// no key twice, the marginal mode of `cal_cfg` (the loop's default), and each key against a
+/// configured gate (`source`; an imported deck has nothing to vary).
+fn read_tolerances(
+    c: &CloseLoopCmd,
+    source: &GateSource,
+    cal_cfg: Option<&CalibrationConfig>,
+) -> Result<Vec<ToleranceSpec>> {
+    let Some(p) = &c.tolerances else {
+        return Ok(Vec::new());
+    };
+    let label = format!("--tolerances {}", p.display());
+    let text = std::fs::read_to_string(p).with_context(|| format!("{label}: reading"))?;
+    let file: ToleranceFile = toml::from_str(&text).with_context(|| label.clone())?;
+    let mode = cal_cfg.map_or(CoefficientMode::Marginal, |c| c.coefficients);
+    check_tolerance_specs(&file.tolerances, mode, &label)?;
+    match source {
+        GateSource::Config(gate) => check_tolerance_keys(&file.tolerances, gate, &label)?,
+        GateSource::Deck { .. } if !file.tolerances.is_empty() => anyhow::bail!(
+            "{label}: tolerances need a gate configuration, not an imported deck (--gate-inp)"
+        ),
+        GateSource::Deck { .. } => {}
+    }
+    Ok(file.tolerances)
 }
 
 /// The gate calibrator with the command's settings.

@@ -433,6 +433,7 @@ fn corpus(base: &Base, fixture: Option<&Fixture>) -> Vec<Case> {
     cases.extend(gate_files(base));
     cases.extend(close_loop_flags(base));
     cases.extend(close_loop_config_files(base));
+    cases.extend(close_loop_tolerance_files(base));
     cases.extend(close_loop_records(base));
     cases.extend(output_paths(base));
     if let Some(fx) = fixture {
@@ -1577,6 +1578,52 @@ fn close_loop_flags(base: &Base) -> Vec<Case> {
             &["--gap-prior"],
         )
         .file("record.csv", &base.record),
+    ]
+}
+
+/// `close-loop --tolerances` (the declared build tolerances, `tol.toml`), checked before the
+/// gate is built.
+fn close_loop_tolerance_files(base: &Base) -> Vec<Case> {
+    let tc = |name: &str, toml: &str, culprits: &[&str]| {
+        Case::new(
+            &format!("close_loop_tolerances_{name}"),
+            BeforeGate,
+            &[
+                "close-loop",
+                "--data",
+                "record.csv",
+                "--tolerances",
+                "tol.toml",
+                "--out",
+                "loop",
+            ],
+            &cat(&["tol.toml"], culprits),
+        )
+        .file("tol.toml", toml)
+        .file("record.csv", &base.record)
+    };
+    vec![
+        tc(
+            "unknown_key",
+            "[[tolerances]]\nkey = \"skin_plate.colour\"\nrelative_sd = 0.03\n",
+            &["tolerances[0].key", "skin_plate.colour"],
+        ),
+        tc(
+            "sd_above_half",
+            "[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.9\n",
+            &["tolerances[0].relative_sd", "(0, 0.5]"],
+        ),
+        tc(
+            "declared_twice",
+            "[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\n\
+             [[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.02\n",
+            &["tolerances[1].key", "twice"],
+        ),
+        tc(
+            "unknown_field",
+            "[[tolerances]]\nkey = \"skin_plate.thickness\"\nrelative_sd = 0.03\nunit = \"in\"\n",
+            &["unit"],
+        ),
     ]
 }
 

@@ -13,6 +13,7 @@ use super::*;
 use bamudi::closeloop::EffectReport;
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
+use bamudi_gate::session::ToleranceSpec;
 use mitergate::data::field::OffsetJump;
 use mitergate::{ContactModel, GateConfig};
 use std::sync::OnceLock;
@@ -225,4 +226,83 @@ fn fe_gate_names_the_undeclared_effect_by_its_covariate() {
     assert_found(&out, |e| {
         e.name == "generic_covariate_term" && e.covariates.iter().any(|c| c == "upper_pool")
     });
+}
+
+/// The drawing with its skin plate `factor` x as thick, built and condensed as [`contact`].
+fn skin_scaled(factor: f64) -> (GateConfig, ContactModel) {
+    let mut cfg = GateConfig::default();
+    cfg.mesh.element_size = 24.0;
+    let drawing = cfg.clone();
+    cfg.skin_plate.thickness *= factor;
+    (drawing, gate::build(&cfg).unwrap().0)
+}
+
+/// The loop on a record from a gate whose skin plate is `factor` x as thick as drawn (no effect
+/// switched on; seed [`SEED`]), its calibrator on the drawing, with the skin declared to a
+/// relative sd of 3 % when `declared`.
+fn thin_skin_loop(factor: f64, declared: bool) -> CloseLoopOutcome {
+    let (drawing, thin) = skin_scaled(factor);
+    let rec = gate::simulate_field(&record_config(SEED, FieldEffects::default()), &thin).unwrap();
+    let skin = ToleranceSpec {
+        key: "skin_plate.thickness".into(),
+        relative_sd: 0.03,
+    };
+    let mut calibrator = test_calibrator(contact());
+    if declared {
+        calibrator = calibrator
+            .tolerances(std::slice::from_ref(&skin), &drawing)
+            .unwrap();
+    }
+    let data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
+    let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
+    let out = close_loop(&data, &calibrator, &cfg).unwrap();
+    let r = &out.report;
+    eprintln!(
+        "FE skin x {factor} (declared: {declared}): {:?}; {}; held-out {:.3} -> {:.3}; gap {:.3} ± {:.3} -> {:.3} ± {:.3}",
+        r.effects.iter().map(|e| &e.name).collect::<Vec<_>>(),
+        r.conclusion,
+        r.heldout_rmse_total_before,
+        r.heldout_rmse_total_after,
+        r.theta_before.mean,
+        r.theta_before.sd,
+        r.theta_after.mean,
+        r.theta_after.sd,
+    );
+    out
+}
+
+/// The loop on as-built gates it is told the tolerance of ([`thin_skin_loop`]): skins 5 % and
+/// 10 % thinner than drawn, declared to 3 % (the truths −1.67 and −3.3 sd). Every calibration
+/// integrates the deviation out and every prediction carries it, so the loop must accept no
+/// effect, the gap must end within 0.5 in of the truth (the clean record's bound) and its 95 %
+/// interval (mean ± 1.96 sd) must hold it.
+///
+/// Measured when written (`cargo test -p bamudi-gate --test lib _skin -- --include-ignored
+/// --nocapture`), gap after the loop, declared against not (`the_loop_without_the_skin_tolerance`;
+/// no effect accepted either way — the discrepancy absorbs a static deviation):
+/// 5 % thinner 90.091 ± 0.225 in against 90.217 ± 0.409 in; 10 % thinner 90.156 ± 0.368 in
+/// against 89.364 ± 0.624 in, which misses the 0.5-in bound.
+#[test]
+fn fe_gate_with_a_declared_tolerance_reads_an_as_built_skin() {
+    for factor in [0.95, 0.90] {
+        let out = thin_skin_loop(factor, true);
+        let r = &out.report;
+        assert!(r.effects.is_empty(), "spurious effects: {:?}", r.effects);
+        let (mean, sd) = (r.theta_after.mean, r.theta_after.sd);
+        assert!((mean - TRUE_GAP).abs() < 0.5, "skin x {factor}: gap {mean}");
+        assert!(
+            (mean - TRUE_GAP).abs() <= 1.96 * sd,
+            "skin x {factor}: gap {mean} ± {sd}"
+        );
+    }
+}
+
+/// The reference of [`fe_gate_with_a_declared_tolerance_reads_an_as_built_skin`]: the same
+/// records without the declaration (a measurement, printed; not run in CI).
+#[test]
+#[ignore = "a measurement for the documentation, not a check"]
+fn the_loop_without_the_skin_tolerance() {
+    for factor in [0.95, 0.90] {
+        thin_skin_loop(factor, false);
+    }
 }
