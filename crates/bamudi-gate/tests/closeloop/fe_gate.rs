@@ -65,13 +65,21 @@ fn run_fe(preset: &str, seed: u64) -> CloseLoopOutcome {
 fn run_fe_with(preset: &str, fx: FieldEffects, seed: u64) -> CloseLoopOutcome {
     let c = contact();
     let rec = gate::simulate_field(&record_config(seed, fx), c).unwrap();
-    let calibrator = test_calibrator(c);
-    let data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
+    run_loop_on(
+        &rec,
+        &test_calibrator(c),
+        &format!("{preset} (seed {seed})"),
+    )
+}
+
+/// The loop on the CSV text of `rec` with `calibrator`; prints its outcome under `label`.
+fn run_loop_on(rec: &FieldRecord, calibrator: &GateCalibrator, label: &str) -> CloseLoopOutcome {
+    let data = gate::as_measured(rec, calibrator.model(), "fe_gate.csv").unwrap();
     let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
-    let out = close_loop(&data, &calibrator, &cfg).unwrap();
+    let out = close_loop(&data, calibrator, &cfg).unwrap();
     let r = &out.report;
     eprintln!(
-        "FE {preset} (seed {seed}): {:?}; {}; held-out {:.3} -> {:.3}; gap {:.3} ± {:.3} -> {:.3} ± {:.3}",
+        "FE {label}: {:?}; {}; held-out {:.3} -> {:.3}; gap {:.3} ± {:.3} -> {:.3} ± {:.3}",
         r.effects.iter().map(|e| &e.name).collect::<Vec<_>>(),
         r.conclusion,
         r.heldout_rmse_total_before,
@@ -83,7 +91,7 @@ fn run_fe_with(preset: &str, fx: FieldEffects, seed: u64) -> CloseLoopOutcome {
     );
     if let (Some(t), Some(e)) = (&r.theta_track, &r.events) {
         eprintln!(
-            "FE {preset} (seed {seed}): gap now from the track {:.3} ± {:.3}, change alarm {:?}; scan alarms {}",
+            "FE {label}: gap now from the track {:.3} ± {:.3}, change alarm {:?}; scan alarms {}",
             t.now.mean,
             t.now.sd,
             t.alarm,
@@ -253,22 +261,11 @@ fn thin_skin_loop(factor: f64, declared: bool) -> CloseLoopOutcome {
             .tolerances(std::slice::from_ref(&skin), &drawing)
             .unwrap();
     }
-    let data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
-    let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
-    let out = close_loop(&data, &calibrator, &cfg).unwrap();
-    let r = &out.report;
-    eprintln!(
-        "FE skin x {factor} (declared: {declared}): {:?}; {}; held-out {:.3} -> {:.3}; gap {:.3} ± {:.3} -> {:.3} ± {:.3}",
-        r.effects.iter().map(|e| &e.name).collect::<Vec<_>>(),
-        r.conclusion,
-        r.heldout_rmse_total_before,
-        r.heldout_rmse_total_after,
-        r.theta_before.mean,
-        r.theta_before.sd,
-        r.theta_after.mean,
-        r.theta_after.sd,
-    );
-    out
+    run_loop_on(
+        &rec,
+        &calibrator,
+        &format!("skin x {factor} (declared: {declared})"),
+    )
 }
 
 /// The loop on as-built gates it is told the tolerance of ([`thin_skin_loop`]): skins 5 % and
