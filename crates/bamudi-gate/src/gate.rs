@@ -21,7 +21,8 @@ pub fn build(cfg: &GateConfig) -> Result<(ContactModel, GateSummary, f64)> {
 }
 
 /// The calibrated model's definition, saved as `model.json` beside `calibration.json` so that
-/// `predict` uses exactly the same gate, prior and discrepancy basis without rebuilding.
+/// `predict` uses exactly the same gate, prior and discrepancy basis without rebuilding the
+/// gate (the declared tolerances' ± models are rebuilt from the stored configuration).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SavedModel {
     /// The gate configuration the contact model was built from (`None` for an imported

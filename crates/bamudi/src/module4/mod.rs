@@ -121,6 +121,14 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         match &m3.marginal {
             None => self.support = m3.posterior.support(policy),
             Some(fit) => {
+                // one test of "tolerances declared" for every entry point below
+                if fit.tolerances.is_empty() != fit.tolerance_columns.is_none() {
+                    return Err(BamudiError::Calibration(
+                        "the marginal fit has tolerance estimates without their columns, or the \
+                         reverse (an edited calibration file?)"
+                            .into(),
+                    ));
+                }
                 let nodes = fit.grouped_nodes(policy.max_nodes);
                 self.support = nodes.iter().map(|n| (n.theta.clone(), n.weight)).collect();
                 let state = self.cal.marginal_state()?;
@@ -365,11 +373,22 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// Module 3 took them, at the posterior mode `θ̄` (and here `ρ`'s posterior mean) for
     /// every support point.
     fn tolerance_columns(&self, x: &[f64], at: &CoefAt) -> Result<Option<ToleranceColumns>> {
-        let (Some(view), Some(_)) = (&self.marginal, &at.tolerance) else {
-            return Ok(None);
-        };
-        let (theta, rho) = (&view.fit.support_theta, view.fit.rho_mean);
-        Ok(Some(columns_at(self.model, x, theta, rho)?))
+        match (self.tolerance_view(), &at.tolerance) {
+            (Some(view), Some(_)) => Ok(Some(self.columns_at_mode(view, x)?)),
+            _ => Ok(None),
+        }
+    }
+
+    /// The marginal view when the calibration integrated declared tolerances.
+    fn tolerance_view(&self) -> Option<&MarginalView<'_>> {
+        self.marginal
+            .as_ref()
+            .filter(|v| !v.fit.tolerances.is_empty())
+    }
+
+    /// The tolerances' columns at `x`, at the posterior mode `θ̄` and `ρ`'s posterior mean.
+    fn columns_at_mode(&self, view: &MarginalView<'_>, x: &[f64]) -> Result<ToleranceColumns> {
+        columns_at(self.model, x, &view.fit.support_theta, view.fit.rho_mean)
     }
 
     /// The number of declared tolerances the predictions carry (marginal mode).
@@ -380,17 +399,11 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// `J(x) η̂`: the declared tolerances' mean contribution to the outputs at `x` (zero
     /// without tolerances).
     fn tolerance_output_shift(&self, x: &[f64]) -> Result<DVector<f64>> {
-        let n_o = self.basis().1.nrows();
-        let Some(view) = self
-            .marginal
-            .as_ref()
-            .filter(|v| !v.fit.tolerances.is_empty())
-        else {
-            return Ok(DVector::zeros(n_o));
+        let Some(view) = self.tolerance_view() else {
+            return Ok(DVector::zeros(self.basis().1.nrows()));
         };
         let eta = tolerance_means(view.fit, view.fit.tolerances.len())?;
-        let (theta, rho) = (&view.fit.support_theta, view.fit.rho_mean);
-        Ok(columns_at(self.model, x, theta, rho)?.observed * eta)
+        Ok(self.columns_at_mode(view, x)?.observed * eta)
     }
 
     /// The coefficients' prior scales `a_k(x)` of the marginal mode, by the rule Module 3 used
