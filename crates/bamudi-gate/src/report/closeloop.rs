@@ -197,6 +197,17 @@ fn track_section(s: &mut String, r: &CloseLoopReport) {
         t.overdispersion,
         t.noise_sd
     );
+    let _ = match &t.anchor {
+        Some(a) => writeln!(
+            s,
+            "Levels anchored on the calibration's posterior, {:.2} ± {:.2} in: the misfit's own single gap over the calibration's rows lies {:+.2} in from it, and every smoothed level and the gap now are moved by that and carry the calibration's sd (the window estimates only their own). The gap moved by {:.2} in (weighted sd) over the calibration's {} windows.\n",
+            a.calibration.mean, a.calibration.sd, a.offset, a.spread, a.windows
+        ),
+        None => writeln!(
+            s,
+            "Levels not anchored on the calibration (no window of its rows carries an estimate, or a result from before anchoring): they leave out the calibration's uncertainty.\n"
+        ),
+    };
     match &t.alarm {
         Some(a) => {
             let _ = writeln!(

@@ -72,7 +72,7 @@ pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
 pub use features::{Features, is_temperature_unit};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, parse_csv, read_csv};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
-pub use track::{ThetaTrack, TrackAlarm, TrackConfig, TrackPoint, TrackState};
+pub use track::{ThetaTrack, TrackAlarm, TrackAnchor, TrackConfig, TrackPoint, TrackState};
 
 use crate::error::{BamudiError, Result};
 use nalgebra::DMatrix;
@@ -650,12 +650,17 @@ fn track_theta(
             target -= c;
         }
     }
+    let mut calibrated = vec![false; rec.time_h.len()];
+    for &i in lp.cal {
+        calibrated[i] = true;
+    }
     let input = track::TrackInput {
         model: st.model.as_ref(),
         x: lp.x,
         target: &target,
         time_h: &rec.time_h,
         noise_sd: stats::median_noise_sd(r_final),
+        calibrated: &calibrated,
     };
     track::track(&input, &lp.cfg.track)
 }

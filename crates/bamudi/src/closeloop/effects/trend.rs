@@ -33,16 +33,19 @@ struct TrackTerm {
 }
 
 impl TrackTerm {
+    /// The term of `t`'s levels on the misfit's scale (the model's `θ` that fits each
+    /// window, not the calibration's reading of it).
     fn from_track(t: &ThetaTrack, bounds: (f64, f64)) -> Self {
+        let offset = t.offset();
         let knots = t
             .points
             .iter()
-            .map(|p| (24.0 * p.day, p.smoothed.0))
+            .map(|p| (24.0 * p.day, p.smoothed.0 + offset))
             .collect();
         let s = &t.state_now;
         Self {
             knots,
-            end: (24.0 * s.day, s.level, s.slope / 24.0),
+            end: (24.0 * s.day, s.level + offset, s.slope / 24.0),
             bounds,
         }
     }
@@ -95,17 +98,14 @@ impl Effect for ParameterTrend {
         let bounds = ctx.model.theta_bounds();
         let term = TrackTerm::from_track(&t, bounds);
         let t_end_h = *ctx.feats.time_h.last().unwrap_or(&0.0);
-        let (ql, qs) = (t.level_sd_per_day.powi(2), t.slope_sd_per_day.powi(2));
-        let (end, sd) = t
-            .state_now
-            .extrapolate(t_end_h / 24.0 - t.state_now.day, ql, qs);
-        let end = end.clamp(bounds.0, bounds.1);
+        let at_end = t.level_at(t_end_h / 24.0);
+        let (end, sd) = (at_end.mean.clamp(bounds.0, bounds.1), at_end.sd);
         let pn = &self.parameter;
         let p = vec![
             param(
                 &format!("{pn}_at_start"),
                 "parameter units",
-                vec![term.knots[0].1],
+                vec![t.points[0].smoothed.0],
             ),
             param(
                 &format!("{pn}_rate_at_end_of_fit"),
@@ -132,12 +132,18 @@ fn calibration_track(
     let resid = select_rows(r, ctx.cal);
     let target = &resid + select_rows(ctx.base_mean, ctx.cal);
     let time_h: Vec<f64> = ctx.cal.iter().map(|&i| ctx.feats.time_h[i]).collect();
+    let mut calibrated_row = vec![false; ctx.x.nrows()];
+    for &i in ctx.calibrated {
+        calibrated_row[i] = true;
+    }
+    let calibrated: Vec<bool> = ctx.cal.iter().map(|&i| calibrated_row[i]).collect();
     let input = TrackInput {
         model: ctx.model,
         x: &x,
         target: &target,
         time_h: &time_h,
         noise_sd: crate::closeloop::stats::median_noise_sd(&resid),
+        calibrated: &calibrated,
     };
     let t = track::track(&input, cfg)?;
     let informed = t.points.iter().filter(|p| p.estimate.is_some()).count();
