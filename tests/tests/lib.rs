@@ -300,6 +300,23 @@ fn prediction_draws_reproduce_the_module4_mixture() {
         predictor.predict_through(&echo, &x, 10, 1).is_err(),
         "too few draws"
     );
+    // paths index the support of the predictor that drew them: another calibration's (a
+    // coarser θ grid) are refused with an error, not an out-of-bounds panic
+    let coarser = CalibrationParams::from(cfg.clone())
+        .theta_grid_points(21)
+        .check()
+        .unwrap();
+    let other = calibrate(&model, &exps, &coarser).unwrap();
+    let foreign = other.predictor(&model).unwrap().draw_paths(50, 1);
+    let err = predictor.draws_at(&foreign, &x).unwrap_err();
+    assert!(err.to_string().contains("another predictor"), "{err}");
+    assert_eq!(
+        predictor
+            .draws_at(&predictor.draw_paths(50, 1), &x)
+            .unwrap()
+            .len(),
+        50
+    );
 }
 
 #[path = "e2e/reproduce_quick.rs"]

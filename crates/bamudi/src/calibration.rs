@@ -448,7 +448,9 @@ impl Calibration {
         if declared != integrated {
             return Err(BamudiError::Calibration(format!(
                 "the model declares the build tolerances {declared:?}, the calibration \
-                 integrated {integrated:?}"
+                 integrated {integrated:?} (a model saved before models kept their tolerances \
+                 has none: save the model again with the calibration's tolerances declared, \
+                 e.g. by re-running the calibration)"
             )));
         }
         Ok(())

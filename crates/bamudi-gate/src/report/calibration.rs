@@ -448,7 +448,7 @@ pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
 }
 
 /// The declared tolerances of the build, integrated out, with their posteriors.
-fn tolerances_markdown(tols: &[bamudi::module3::marginal::ToleranceEstimate]) -> String {
+pub(super) fn tolerances_markdown(tols: &[bamudi::module3::marginal::ToleranceEstimate]) -> String {
     tols.iter()
         .map(|t| {
             format!(

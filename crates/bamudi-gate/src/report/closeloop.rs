@@ -1,12 +1,13 @@
 //! The close loop's report on a gate record: `report.md`, `results.json` and SVG plots.
 
-use super::calibration::{ReportInputs, inputs_markdown};
+use super::calibration::{ReportInputs, inputs_markdown, tolerances_markdown};
 use super::plot::{
     AFTER, ALARM, Axes, BAND, BEFORE, Series, draw_legend, line_plot, svg_figure, tick,
 };
 use crate::error::{GateAppError, Result};
 use crate::record_fatigue::RecordFatigue;
 use bamudi::closeloop::{CloseLoopOutcome, CloseLoopReport};
+use bamudi::module3::marginal::ToleranceEstimate;
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -351,10 +352,18 @@ pub fn write_report(
     if let Some(f) = fatigue {
         text.push_str(&fatigue_markdown(f));
     }
+    let tolerances = final_tolerances(out);
+    if !tolerances.is_empty() {
+        text.push_str(
+            "\n## Declared tolerances (the loop's final calibration)\n\nWhat the data read of the build's declared tolerances, integrated out by every calibration of the loop (`results.json` key `tolerances`):\n\n",
+        );
+        text.push_str(&tolerances_markdown(&tolerances));
+    }
     bamudi::data::write_atomic(&md, text.as_bytes())?;
     files.push(md);
     let js = dir.join("results.json");
-    bamudi::data::write_atomic(&js, results_json(&out.report, fatigue, &js)?.as_bytes())?;
+    let json = results_json(&out.report, fatigue, &tolerances, &js)?;
+    bamudi::data::write_atomic(&js, json.as_bytes())?;
     files.push(js);
     if let Some(f) = fatigue {
         let p = dir.join("fatigue_along_quoin.svg");
@@ -386,19 +395,38 @@ pub fn write_report(
 }
 
 /// The report as JSON, with the fatigue under `record_fatigue` when there is one.
-fn results_json(r: &CloseLoopReport, fatigue: Option<&RecordFatigue>, js: &Path) -> Result<String> {
+fn results_json(
+    r: &CloseLoopReport,
+    fatigue: Option<&RecordFatigue>,
+    tolerances: &[ToleranceEstimate],
+    js: &Path,
+) -> Result<String> {
     let serde = |e: serde_json::Error| GateAppError::Serde {
         context: js.display().to_string(),
         reason: e.to_string(),
     };
     let mut value = serde_json::to_value(r).map_err(serde)?;
-    if let (Some(f), Some(map)) = (fatigue, value.as_object_mut()) {
-        map.insert(
-            "record_fatigue".into(),
-            serde_json::to_value(f).map_err(serde)?,
-        );
+    if let Some(map) = value.as_object_mut() {
+        if let Some(f) = fatigue {
+            let f = serde_json::to_value(f).map_err(serde)?;
+            map.insert("record_fatigue".into(), f);
+        }
+        if !tolerances.is_empty() {
+            let t = serde_json::to_value(tolerances).map_err(serde)?;
+            map.insert("tolerances".into(), t);
+        }
     }
     serde_json::to_string_pretty(&value).map_err(serde)
+}
+
+/// The final calibration's posteriors of the build's declared tolerances (in their standard
+/// deviations); empty without any, or when the loop's model is not a gate calibration.
+fn final_tolerances(out: &CloseLoopOutcome) -> Vec<ToleranceEstimate> {
+    let any: &dyn std::any::Any = out.model.as_ref();
+    any.downcast_ref::<crate::calibrator::CalibratedGate>()
+        .and_then(|g| g.calibration().module3().marginal.as_ref())
+        .map(|m| m.tolerances.clone())
+        .unwrap_or_default()
 }
 
 /// The fatigue section of `report.md`.

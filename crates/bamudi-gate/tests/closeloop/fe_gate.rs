@@ -308,7 +308,28 @@ fn fe_gate_with_a_declared_tolerance_reads_an_as_built_skin() {
             now.mean,
             now.sd
         );
+        assert_reports_the_skin_reading(&out, factor);
     }
+}
+
+/// `report.md` and `results.json` give what the loop's final calibration read of the skin
+/// plate, in its declared sds (truth `(factor − 1) / 0.03`), and its 95 % interval holds it.
+fn assert_reports_the_skin_reading(out: &CloseLoopOutcome, factor: f64) {
+    let dir = std::env::temp_dir().join(format!("bamudi_skin_report_{factor}"));
+    bamudi_gate::report::closeloop::write_report(out, None, None, &dir).unwrap();
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert!(md.contains("## Declared tolerances") && md.contains("`skin_plate.thickness`"));
+    let js: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let t = &js["tolerances"][0];
+    let (mean, sd) = (t["mean"].as_f64().unwrap(), t["sd"].as_f64().unwrap());
+    let truth = (factor - 1.0) / 0.03;
+    eprintln!("skin x {factor}: read {mean:+.2} ± {sd:.2} sd (truth {truth:+.2})");
+    assert_eq!(t["name"], "skin_plate.thickness");
+    assert!(
+        (mean - truth).abs() <= 1.96 * sd,
+        "skin x {factor}: read {mean} ± {sd} sd, truth {truth}"
+    );
 }
 
 /// The reference of [`fe_gate_with_a_declared_tolerance_reads_an_as_built_skin`]: the same

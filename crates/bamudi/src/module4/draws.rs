@@ -51,6 +51,9 @@ pub struct DrawPaths {
     rho_z: Vec<f64>,
     /// Standard normals of the coefficients per draw.
     alpha_z: Vec<DVector<f64>>,
+    /// Fingerprint of the predictor the paths were drawn for (its support and coefficient
+    /// count): paths index its support, so another predictor's are refused.
+    source: u64,
 }
 
 impl DrawPaths {
@@ -91,6 +94,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             picks: Vec::with_capacity(n),
             rho_z: Vec::with_capacity(n),
             alpha_z: Vec::with_capacity(n),
+            source: self.paths_fingerprint(n_coef),
         };
         for _ in 0..n {
             let u = rng.random::<f64>() * total;
@@ -106,9 +110,29 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         paths
     }
 
+    /// Fingerprint of this predictor's support (`θ` nodes and weights, bit for bit) and of the
+    /// number of coefficients a draw carries.
+    fn paths_fingerprint(&self, n_coef: usize) -> u64 {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        n_coef.hash(&mut h);
+        for (theta, w) in &self.support {
+            theta.iter().for_each(|t| t.to_bits().hash(&mut h));
+            w.to_bits().hash(&mut h);
+        }
+        h.finish()
+    }
+
     /// The draws of `paths` at `x`; the model is evaluated once per support point the draws
-    /// use.
+    /// use. Paths drawn by another predictor ([`Self::draw_paths`]) are an error.
     pub fn draws_at(&self, paths: &DrawPaths, x: &[f64]) -> Result<Vec<ResponseDraw>> {
+        let n_coef = self.basis().0.ncols() + self.n_tolerances();
+        if paths.source != self.paths_fingerprint(n_coef) {
+            return Err(BamudiError::config(
+                "draws",
+                "the draw paths were drawn for another predictor (another support or coefficient count)".to_string(),
+            ));
+        }
         let at = self.coef_at(x)?;
         let (basis, cov, eta) = self.draw_basis(x, &at)?;
         let factor = match cov.iter().any(|v| *v != 0.0) {
