@@ -92,10 +92,7 @@ pub fn close_loop(
         gate::check_record(&rec, model)?;
         let cfg = gate::close_loop_config(cfg, &rec);
         let out = run_loop(&rec, &calibrator, &cfg)?;
-        serde_json::to_string(&out.report).map_err(|e| bamudi_gate::GateAppError::Serde {
-            context: "the close-loop report".into(),
-            reason: e.to_string(),
-        })
+        bamudi_gate::report::closeloop::results_json(&out, None, "the close-loop report")
     })
     .map_err(to_py)
 }

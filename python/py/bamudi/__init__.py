@@ -321,7 +321,9 @@ def close_loop(
     declared build tolerances (``[{"key": ..., "relative_sd": ...}]``, as in ``calibrate``),
     which every calibration of the loop integrates out. Returns the loop's
     report as a dict: the command line's ``results.json`` without its ``record_fatigue`` part
-    (the quoin block's fatigue over the record)."""
+    (the quoin block's fatigue over the record); with ``tolerances``, its ``"tolerances"`` key
+    gives what the final calibration read of each (``[{"name", "mean", "sd"}]`` in their own
+    sds)."""
     if isinstance(record, FieldRecord):
         csv, label = record.csv, "record"
     else:

@@ -362,7 +362,7 @@ pub fn write_report(
     bamudi::data::write_atomic(&md, text.as_bytes())?;
     files.push(md);
     let js = dir.join("results.json");
-    let json = results_json(&out.report, fatigue, &tolerances, &js)?;
+    let json = results_json(out, fatigue, &js.display().to_string())?;
     bamudi::data::write_atomic(&js, json.as_bytes())?;
     files.push(js);
     if let Some(f) = fatigue {
@@ -395,17 +395,20 @@ pub fn write_report(
 }
 
 /// The report as JSON, with the fatigue under `record_fatigue` when there is one.
-fn results_json(
-    r: &CloseLoopReport,
+/// The text of `results.json`: the loop's report, the declared tolerances the final
+/// calibration read (`tolerances`, when declared) and the record's fatigue (`record_fatigue`,
+/// when given); `context` names the output in an error.
+pub fn results_json(
+    out: &CloseLoopOutcome,
     fatigue: Option<&RecordFatigue>,
-    tolerances: &[ToleranceEstimate],
-    js: &Path,
+    context: &str,
 ) -> Result<String> {
     let serde = |e: serde_json::Error| GateAppError::Serde {
-        context: js.display().to_string(),
+        context: context.to_string(),
         reason: e.to_string(),
     };
-    let mut value = serde_json::to_value(r).map_err(serde)?;
+    let tolerances = final_tolerances(out);
+    let mut value = serde_json::to_value(&out.report).map_err(serde)?;
     if let Some(map) = value.as_object_mut() {
         if let Some(f) = fatigue {
             let f = serde_json::to_value(f).map_err(serde)?;

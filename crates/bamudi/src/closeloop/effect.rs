@@ -81,8 +81,6 @@ pub struct FitContext<'a> {
     pub x: &'a DMatrix<f64>,
     /// The calibration rows (the only ones a fit may use).
     pub cal: &'a [usize],
-    /// The rows the current model was calibrated on (a subset of `cal`).
-    pub calibrated: &'a [usize],
     /// The current calibrated model.
     pub model: &'a dyn CalibratedModel,
     /// Its predictive mean at every row.

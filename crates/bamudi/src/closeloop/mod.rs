@@ -660,7 +660,7 @@ fn track_theta(
         target: &target,
         time_h: &rec.time_h,
         noise_sd: stats::median_noise_sd(r_final),
-        calibrated: &calibrated,
+        calibrated: Some(&calibrated),
     };
     track::track(&input, &lp.cfg.track)
 }

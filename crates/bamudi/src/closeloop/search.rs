@@ -88,7 +88,6 @@ impl Loop<'_> {
             feats: self.feats,
             x: self.x,
             cal: rows,
-            calibrated: self.cal,
             model: st.model.as_ref(),
             base_mean: &st.mean,
             gauges: self.gauges,

@@ -99,7 +99,10 @@ impl Effect for ParameterTrend {
         let term = TrackTerm::from_track(&t, bounds);
         let t_end_h = *ctx.feats.time_h.last().unwrap_or(&0.0);
         let at_end = t.level_at(t_end_h / 24.0);
-        let (end, sd) = (at_end.mean.clamp(bounds.0, bounds.1), at_end.sd);
+        // the track over the fit rows is the misfit's own (not anchored: the term works on
+        // that scale); the gap at the end also carries the calibration's uncertainty
+        let sd = at_end.sd.hypot(ctx.model.theta_summary().sd);
+        let end = at_end.mean.clamp(bounds.0, bounds.1);
         let pn = &self.parameter;
         let p = vec![
             param(
@@ -132,18 +135,13 @@ fn calibration_track(
     let resid = select_rows(r, ctx.cal);
     let target = &resid + select_rows(ctx.base_mean, ctx.cal);
     let time_h: Vec<f64> = ctx.cal.iter().map(|&i| ctx.feats.time_h[i]).collect();
-    let mut calibrated_row = vec![false; ctx.x.nrows()];
-    for &i in ctx.calibrated {
-        calibrated_row[i] = true;
-    }
-    let calibrated: Vec<bool> = ctx.cal.iter().map(|&i| calibrated_row[i]).collect();
     let input = TrackInput {
         model: ctx.model,
         x: &x,
         target: &target,
         time_h: &time_h,
         noise_sd: crate::closeloop::stats::median_noise_sd(&resid),
-        calibrated: &calibrated,
+        calibrated: None,
     };
     let t = track::track(&input, cfg)?;
     let informed = t.points.iter().filter(|p| p.estimate.is_some()).count();

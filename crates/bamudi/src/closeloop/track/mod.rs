@@ -174,7 +174,8 @@ pub struct ThetaTrack {
     /// scale (without the calibration's uncertainty: [`ThetaTrack::level_at`] adds it).
     pub state_now: TrackState,
     /// How the levels are placed on the calibration's posterior; `None` when no window of the
-    /// calibrated rows carries an estimate (the levels are then the misfit's own).
+    /// calibrated rows carries an estimate, or for the loop's trend term (the levels are then
+    /// the misfit's own).
     #[serde(default)]
     pub anchor: Option<TrackAnchor>,
     /// The change alarm, when it fired.
@@ -320,16 +321,18 @@ pub(crate) struct TrackInput<'a> {
     pub time_h: &'a [f64],
     /// Residual white-noise sd (output units).
     pub noise_sd: f64,
-    /// Per row: whether the model was calibrated on it (the rows its `θ` posterior is about).
-    pub calibrated: &'a [bool],
+    /// Per row: whether the model was calibrated on it (the rows its `θ` posterior is about);
+    /// `None`: the track is not anchored (the loop's trend term, which works on the misfit's
+    /// scale, does not need it and is fitted many times).
+    pub calibrated: Option<&'a [bool]>,
 }
 
 /// Tracks the parameter (module docs).
 pub(crate) fn track(inp: &TrackInput<'_>, cfg: &TrackConfig) -> Result<ThetaTrack> {
-    if inp.calibrated.len() != inp.time_h.len() {
+    if let Some(c) = inp.calibrated.filter(|c| c.len() != inp.time_h.len()) {
         return Err(BamudiError::Calibration(format!(
             "track: {} calibrated-row flags for {} rows",
-            inp.calibrated.len(),
+            c.len(),
             inp.time_h.len()
         )));
     }
@@ -409,13 +412,14 @@ fn anchor_of(
     smooth: &ssm::Smoothed,
     grid_nodes: usize,
 ) -> Result<Option<TrackAnchor>> {
+    let Some(calibrated) = inp.calibrated else {
+        return Ok(None);
+    };
     let in_calibration: Vec<bool> = windows
         .iter()
-        .map(|rows| 2 * rows.iter().filter(|&&i| inp.calibrated[i]).count() > rows.len())
+        .map(|rows| 2 * rows.iter().filter(|&&i| calibrated[i]).count() > rows.len())
         .collect();
-    let calibrated_rows: Vec<usize> = (0..inp.time_h.len())
-        .filter(|&i| inp.calibrated[i])
-        .collect();
+    let calibrated_rows: Vec<usize> = (0..inp.time_h.len()).filter(|&i| calibrated[i]).collect();
     let start = weighted_mean(
         est.iter()
             .zip(&in_calibration)
@@ -946,7 +950,7 @@ mod tests {
             target: &y,
             time_h: &time_h,
             noise_sd: 1.0,
-            calibrated: &calibrated,
+            calibrated: Some(&calibrated),
         };
         let t = track(&input, &TrackConfig::default()).expect("the track runs");
         let err = (t.now.mean - truth[n - 1]).abs();
