@@ -64,15 +64,22 @@ def test_a_field_record_and_its_close_loop_equal_the_cli(gate, cli, tmp_path):
                "--effect", "offset-jump", "--out", "r.csv", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "r.csv").read_text() == rec.csv
-    args = dict(gap_prior=(60.0, 120.0), max_experiments=40)
+    # a declared build tolerance: both report what the final calibration read of it
+    (tmp_path / "tol.toml").write_text(
+        '[[tolerances]]\nkey = "skin_plate.thickness"\nrelative_sd = 0.03\n')
+    tolerance = {"key": "skin_plate.thickness", "relative_sd": 0.03}
+    args = dict(gap_prior=(60.0, 120.0), max_experiments=40, tolerances=[tolerance])
     done = cli("--seed", 4, "close-loop", "--data", "r.csv", "--gap-prior", "60,120",
-               "--max-experiments", 40, "--out", "loop", cwd=tmp_path)
+               "--max-experiments", 40, "--tolerances", "tol.toml", "--out", "loop", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     cli_report = json.loads((tmp_path / "loop" / "results.json").read_text())
     py_report = bamudi.close_loop(gate, tmp_path / "r.csv", seed=4, **args)
     assert py_report["theta_after"] == cli_report["theta_after"]
     assert py_report["effects"] == cli_report["effects"]
     assert py_report["conclusion"] == cli_report["conclusion"]
+    assert py_report["tolerances"] == cli_report["tolerances"]
+    [read] = py_report["tolerances"]
+    assert read["name"] == "skin_plate.thickness" and read["sd"] > 0, read
     # the record object gives the same report as its file
     from_record = bamudi.close_loop(gate, rec, seed=4, **args)
     assert from_record["theta_after"] == py_report["theta_after"]

@@ -120,7 +120,10 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     if let (Some(drawing), false) = (built.config.as_ref(), tolerances.is_empty()) {
         calibrator = calibrator
             .tolerances(&tolerances, drawing)
-            .context("--tolerances")?;
+            .with_context(|| {
+                let file = c.tolerances.as_deref().unwrap_or(std::path::Path::new(""));
+                format!("--tolerances {}", file.display())
+            })?;
     }
     let calibrator = calibrator.observer(bars);
     let model = calibrator.model();

@@ -206,7 +206,7 @@ fn track_section(s: &mut String, r: &CloseLoopReport) {
         ),
         None => writeln!(
             s,
-            "Levels not anchored on the calibration (no window of its rows carries an estimate, or a result from before anchoring): they leave out the calibration's uncertainty.\n"
+            "Levels not anchored on the calibration (no window of its rows carries an estimate, the misfit over its rows has no minimum, its summary is not finite, or a result from before anchoring): they leave out the calibration's uncertainty.\n"
         ),
     };
     match &t.alarm {
@@ -394,7 +394,6 @@ pub fn write_report(
     Ok(files)
 }
 
-/// The report as JSON, with the fatigue under `record_fatigue` when there is one.
 /// The text of `results.json`: the loop's report, the declared tolerances the final
 /// calibration read (`tolerances`, when declared) and the record's fatigue (`record_fatigue`,
 /// when given); `context` names the output in an error.

@@ -315,7 +315,10 @@ fn fe_gate_with_a_declared_tolerance_reads_an_as_built_skin() {
 /// `report.md` and `results.json` give what the loop's final calibration read of the skin
 /// plate, in its declared sds (truth `(factor − 1) / 0.03`), and its 95 % interval holds it.
 fn assert_reports_the_skin_reading(out: &CloseLoopOutcome, factor: f64) {
-    let dir = std::env::temp_dir().join(format!("bamudi_skin_report_{factor}"));
+    let dir = std::env::temp_dir().join(format!(
+        "bamudi_skin_report_{}_{factor}",
+        std::process::id()
+    ));
     bamudi_gate::report::closeloop::write_report(out, None, None, &dir).unwrap();
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     assert!(md.contains("## Declared tolerances") && md.contains("`skin_plate.thickness`"));
@@ -330,6 +333,7 @@ fn assert_reports_the_skin_reading(out: &CloseLoopOutcome, factor: f64) {
         (mean - truth).abs() <= 1.96 * sd,
         "skin x {factor}: read {mean} ± {sd} sd, truth {truth}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The reference of [`fe_gate_with_a_declared_tolerance_reads_an_as_built_skin`]: the same

@@ -110,3 +110,201 @@ fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
         assert!(s.force_rmse_ratio_median.normal <= 0.2);
     }
 }
+
+/// Module 4's force bands on a gate built unlike its drawing, with the deviation's field
+/// declared as a build tolerance. The reality: the skin plate 5 % thinner than drawn (declared
+/// sd 3 %, so the truth sits −1.67 sd off), `ρ = 0.8` and the paper's discrepancy (Eq. 53-54),
+/// 60 experiments with 1 microstrain of noise, `θ*` at three places in scenario 1's prior. The
+/// skin changes the contact force itself, not only the strains (`R ≠ 0`: the predictions must
+/// carry the deviation into the unobservable response, which the beam test with `R = 0` does
+/// not exercise). The truth's force at 10 new water-level pairs is the as-built gate's
+/// `0.8 g(x, θ*) + δ(x)`.
+///
+/// Asserted (bounds set before the first run): the 95 % normal-force bands hold the true force
+/// at ≥ 0.90 of the condition x point pairs over the three data sets (issue 15's bound for the
+/// force bands), and the 95 % gap interval holds `θ*` in at least 2 of 3 (at the nominal 0.95,
+/// 1 or fewer has probability 0.007).
+///
+/// What the band bound can and cannot see (measured with the ignored test below, 12 data sets,
+/// `θ*` = 82-104 in): declared, the bands hold 0.991 of the pairs and bands half as wide 0.942;
+/// undeclared, 0.911 and 0.549, with the gap's interval holding `θ*` 12 of 12 times against 8
+/// of 12. The bands are conservative over most of the quoin, so the pair bound catches gross
+/// over-confidence only: it passes half-width bands and the calibration that left the skin out.
+/// A first version of this test also asserted that half-width bands fail the bound; they did on
+/// its first seeds (0.866) but not over the 12 data sets, so that assertion was removed rather
+/// than kept on a lucky seed. The gap's interval is the check here that the deviation matters.
+///
+/// Measured when written (`cargo test -p bamudi-gate --test lib force_bands -- --nocapture`,
+/// about 15 s): bands hold 14605 of 15270 pairs (0.956; per data set 0.948, 0.954, 0.967),
+/// gaps 85.50 ± 0.26, 93.30 ± 0.22, 101.10 ± 0.17 in (3 of 3). On the first version's seeds
+/// one data set (`θ*` = 93, gap 93.52 ± 0.21 in, missed) held 0.854: misses from the gap's
+/// edge to the top, the worst at the top point, where 7 gauges do not constrain the
+/// discrepancy's Legendre terms and the mean extrapolates (6700 ± 3350 lbf/in against a true
+/// 0); and at a condition with a 0.8 in head, bands (scaled, like the discrepancy's prior, to
+/// the model's nearly vanishing force) narrower than the truth's discrepancy of under 1 lbf/in.
+#[test]
+fn force_bands_carry_a_declared_tolerance_on_an_as_built_gate() {
+    let setup = AsBuiltSkin::new();
+    let mut declared = SkinTally::default();
+    for (r, theta) in [85.0, 93.0, 101.0].into_iter().enumerate() {
+        let [d, _] = setup.replicate(theta, 910 + 10 * r as u64, false);
+        declared.add(&d);
+    }
+    let (rate, _) = declared.rates();
+    assert!(rate >= 0.90, "declared: normal bands hold {declared:?}");
+    assert!(
+        declared.covered >= 2,
+        "declared: θ* covered in {} of 3",
+        declared.covered
+    );
+}
+
+/// The measurement behind the test above on more data sets (`θ*` at 12 places spread over
+/// the prior, other seeds), with and without the declaration: `cargo test -p bamudi-gate --test lib
+/// as_built_skin_force_bands_over_twelve -- --ignored --nocapture`.
+#[test]
+#[ignore = "a measurement for the documentation, not a check"]
+fn as_built_skin_force_bands_over_twelve_gaps() {
+    let setup = AsBuiltSkin::new();
+    let (mut declared, mut undeclared) = (SkinTally::default(), SkinTally::default());
+    for r in 0..12 {
+        let theta = 82.0 + 2.0 * r as f64;
+        let [d, u] = setup.replicate(theta, 7000 + 10 * r as u64, true);
+        declared.add(&d);
+        undeclared.add(&u);
+    }
+    eprintln!(
+        "declared over 12 gaps: {declared:?}, rates {:?}",
+        declared.rates()
+    );
+    eprintln!("undeclared: {undeclared:?}, rates {:?}", undeclared.rates());
+}
+
+/// Hits of one calibration (or a sum of them) against its as-built truth.
+#[derive(Debug, Default, Clone, Copy)]
+struct SkinTally {
+    /// Condition x point pairs whose true normal force lies in the 95 % band.
+    inside: usize,
+    /// The same for bands half as wide (each side of the mixture's mean halved).
+    inside_half: usize,
+    /// Condition x point pairs scored.
+    pairs: usize,
+    /// Data sets whose 95 % gap interval holds `θ*`.
+    covered: usize,
+}
+
+impl SkinTally {
+    fn add(&mut self, o: &SkinTally) {
+        self.inside += o.inside;
+        self.inside_half += o.inside_half;
+        self.pairs += o.pairs;
+        self.covered += o.covered;
+    }
+
+    /// Fractions of pairs inside the 95 % bands and inside the half-width bands.
+    fn rates(&self) -> (f64, f64) {
+        let n = self.pairs.max(1) as f64;
+        (self.inside as f64 / n, self.inside_half as f64 / n)
+    }
+}
+
+/// The drawing (24-in mesh) calibrated with and without the skin plate declared to 3 %, and
+/// the as-built gate whose skin is 5 % thinner.
+struct AsBuiltSkin {
+    truth_contact: mitergate::ContactModel,
+    declared: mitergate::GateMultiLevel,
+    undeclared: mitergate::GateMultiLevel,
+}
+
+impl AsBuiltSkin {
+    fn new() -> Self {
+        use bamudi_gate::session::{ToleranceSpec, build_tolerances};
+        use mitergate::{GateConfig, MultiLevelSpec, reality::Reality};
+        let mut drawing = GateConfig::default();
+        drawing.mesh.element_size = 24.0;
+        let thin = Reality::scaled_field(&drawing, "skin_plate.thickness", 0.95).unwrap();
+        let (contact, _, _) = bamudi_gate::gate::build(&drawing).unwrap();
+        let (truth_contact, _, _) = bamudi_gate::gate::build(&thin).unwrap();
+        let spec = MultiLevelSpec {
+            gap_prior_in: (81.0, 105.0),
+            discrepancy_terms: [6, 6],
+            memo_capacity: 100_000,
+        };
+        let undeclared = mitergate::multilevel(contact.clone(), &spec).unwrap();
+        let tolerance = ToleranceSpec {
+            key: "skin_plate.thickness".into(),
+            relative_sd: 0.03,
+        };
+        let built = build_tolerances(&[tolerance], Some(&drawing), "test").unwrap();
+        let declared = mitergate::multilevel(contact, &spec)
+            .unwrap()
+            .with_tolerances(built)
+            .unwrap();
+        Self {
+            truth_contact,
+            declared,
+            undeclared,
+        }
+    }
+
+    /// One data set (60 experiments, `ρ` = 0.8, the paper's discrepancy, 1 microstrain of
+    /// noise) at `theta`, calibrated with the declaration (and without, when `both`), scored
+    /// at 10 new conditions; seeds from `seed`.
+    fn replicate(&self, theta: f64, seed: u64, both: bool) -> [SkinTally; 2] {
+        use bamudi::{Calibrate, CalibrationParams, CoefficientMode, EstimatorParams};
+        use bamudi_gate::coverage::{DiscrepancyShape, Truth};
+        use mitergate::data::truth::sample_levels;
+        let truth = Truth {
+            theta,
+            rho: 0.8,
+            shape: DiscrepancyShape::Paper,
+        };
+        let levels = sample_levels(60, seed);
+        let y = truth
+            .strains(&self.truth_contact, &levels, 1.0, seed + 1)
+            .unwrap();
+        let x = nalgebra::DMatrix::from_fn(levels.len(), 2, |i, j| levels[i][j]);
+        let gauges = (1..=y.ncols()).map(|g| format!("g{g}")).collect();
+        let exps =
+            bamudi::Experiments::new(vec!["h_up".into(), "h_down".into()], gauges, x, y).unwrap();
+        let cfg = CalibrationParams::default()
+            .estimator(EstimatorParams::ExactLinear)
+            .coefficients(CoefficientMode::Marginal)
+            .theta_grid_points(121)
+            .sampling(bamudi::SamplingRule::default().noise_sd(1.0))
+            .seed(seed + 2)
+            .check()
+            .unwrap();
+        let new_x = sample_levels(10, seed + 3);
+        let mut out = [SkinTally::default(); 2];
+        let models = if both { 2 } else { 1 };
+        for (k, model) in [&self.declared, &self.undeclared][..models]
+            .iter()
+            .enumerate()
+        {
+            let cal = Calibrate::new(&cfg).run(*model, &exps).unwrap();
+            let s = cal.module3().posterior.summary(0);
+            let t = &mut out[k];
+            t.covered = usize::from((s.ci95.0..=s.ci95.1).contains(&theta));
+            let predictor = cal.predictor(*model).unwrap();
+            for xn in &new_x {
+                let f = truth.forces(&self.truth_contact, *xn).unwrap();
+                let band = predictor.response(xn).unwrap();
+                for p in 0..self.truth_contact.gate().n_points() {
+                    let (m, lo, hi) = (band.mean[p], band.lower[p], band.upper[p]);
+                    t.inside += usize::from(lo <= f[p] && f[p] <= hi);
+                    let (lo, hi) = (m - 0.5 * (m - lo), m + 0.5 * (hi - m));
+                    t.inside_half += usize::from(lo <= f[p] && f[p] <= hi);
+                    t.pairs += 1;
+                }
+            }
+            eprintln!(
+                "skin x 0.95, θ* {theta}, {}: gap {:.2} ± {:.2} in, {t:?}",
+                ["declared", "undeclared"][k],
+                s.mean,
+                s.sd
+            );
+        }
+        out
+    }
+}

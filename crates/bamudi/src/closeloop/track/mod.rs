@@ -100,8 +100,8 @@ pub struct TrackPoint {
     /// The window's own estimate and its sd (over-dispersion included); `None` when the window
     /// does not inform the parameter.
     pub estimate: Option<(f64, f64)>,
-    /// Filtered mean and sd (data up to this window; when anchored, the anchor uses every
-    /// window).
+    /// Filtered mean and sd (data up to this window; when anchored, moved by the anchor's
+    /// offset, which is fitted on every calibrated row, so not on past data alone).
     pub filtered: (f64, f64),
     /// Smoothed mean and sd (all data).
     pub smoothed: (f64, f64),
@@ -173,9 +173,10 @@ pub struct ThetaTrack {
     /// anchored), slope (parameter units per day) and their covariance on the track's own
     /// scale (without the calibration's uncertainty: [`ThetaTrack::level_at`] adds it).
     pub state_now: TrackState,
-    /// How the levels are placed on the calibration's posterior; `None` when no window of the
-    /// calibrated rows carries an estimate, or for the loop's trend term (the levels are then
-    /// the misfit's own).
+    /// How the levels are placed on the calibration's posterior; `None` for the loop's trend
+    /// term, when no window of the calibrated rows carries an estimate, when the misfit over the
+    /// calibrated rows has no minimum, or when the calibration's summary is not finite (the
+    /// levels are then the misfit's own, without the calibration's uncertainty).
     #[serde(default)]
     pub anchor: Option<TrackAnchor>,
     /// The change alarm, when it fired.
