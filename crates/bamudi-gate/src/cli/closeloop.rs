@@ -81,8 +81,8 @@ struct ToleranceFile {
     tolerances: Vec<ToleranceSpec>,
 }
 
-/// Runs `close-loop`.
-pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<()> {
+/// Checks the command's own arguments; returns the gap prior `(lo, hi)` (in).
+fn check_args(c: &CloseLoopCmd) -> Result<(f64, f64)> {
     anyhow::ensure!(
         c.gap_prior.len() == 2,
         "--gap-prior must be two numbers lo,hi (in), got {} value(s)",
@@ -104,6 +104,12 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
             "--gauge-noise-sd must be a positive number of microstrain, got {sd}"
         );
     }
+    Ok((lo, hi))
+}
+
+/// Runs `close-loop`.
+pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<()> {
+    let (lo, hi) = check_args(c)?;
     let cfg = loop_config(c)?;
     let cal_cfg = calibration_config(c)?;
     let source = gate_source(gate_args)?;

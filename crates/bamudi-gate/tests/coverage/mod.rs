@@ -125,23 +125,31 @@ fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
 /// force bands), and the 95 % gap interval holds `θ*` in at least 2 of 3 (at the nominal 0.95,
 /// 1 or fewer has probability 0.007).
 ///
-/// What the band bound can and cannot see (measured with the ignored test below, 12 data sets,
-/// `θ*` = 82-104 in): declared, the bands hold 0.991 of the pairs and bands half as wide 0.942;
-/// undeclared, 0.911 and 0.549, with the gap's interval holding `θ*` 12 of 12 times against 8
-/// of 12. The bands are conservative over most of the quoin, so the pair bound catches gross
-/// over-confidence only: it passes half-width bands and the calibration that left the skin out.
-/// A first version of this test also asserted that half-width bands fail the bound; they did on
-/// its first seeds (0.866) but not over the 12 data sets, so that assertion was removed rather
-/// than kept on a lucky seed. The gap's interval is the check here that the deviation matters.
+/// What this test can and cannot see. It checks the declared calibration's claims (its bands
+/// and its gap interval hold the as-built truth); it has no demonstrated power against a
+/// calibration, or a Module 4, that left the skin out. Measured with the ignored test below
+/// (12 data sets, `θ*` = 82-104 in, other seeds): declared, the bands hold 0.991 of the pairs
+/// and bands half as wide 0.942; undeclared, 0.911 and 0.549, and the gap's interval holds
+/// `θ*` 12 of 12 times against 8 of 12. The bands are conservative over most of the quoin, so
+/// the pair bound passes the undeclared calibration and half-width bands, and at 8 of 12 the
+/// undeclared one would meet "2 of 3" with probability 0.74: the contrast is a measurement,
+/// not an assertion.
 ///
 /// Measured when written (`cargo test -p bamudi-gate --test lib force_bands -- --nocapture`,
-/// about 15 s): bands hold 14605 of 15270 pairs (0.956; per data set 0.948, 0.954, 0.967),
-/// gaps 85.50 ± 0.26, 93.30 ± 0.22, 101.10 ± 0.17 in (3 of 3). On the first version's seeds
-/// one data set (`θ*` = 93, gap 93.52 ± 0.21 in, missed) held 0.854: misses from the gap's
-/// edge to the top, the worst at the top point, where 7 gauges do not constrain the
-/// discrepancy's Legendre terms and the mean extrapolates (6700 ± 3350 lbf/in against a true
-/// 0); and at a condition with a 0.8 in head, bands (scaled, like the discrepancy's prior, to
-/// the model's nearly vanishing force) narrower than the truth's discrepancy of under 1 lbf/in.
+/// about 12 s): bands hold 14605 of 15270 pairs (0.956; per data set 0.948, 0.954, 0.967, at
+/// the low end of the 12-set measurement's 0.954-1.000), gaps 85.50 ± 0.26 (1.9 sd from `θ*`,
+/// near the interval's edge; the grid's step is 0.2 in), 93.30 ± 0.22, 101.10 ± 0.17 in
+/// (3 of 3). History, so that no seed looks chosen: the first version (same bounds, seeds
+/// 910 + r, 920 + r, 930 + r, 940 + r) held 0.951 of the pairs and `θ*` 2 of 3; moving the
+/// set-up into [`AsBuiltSkin`] changed the seed scheme to the one below, and the numbers above
+/// are its. On the first seeds one data set (`θ*` = 93, gap 93.52 ± 0.21 in, missed) held
+/// 0.854: misses from the gap's edge to the top, the worst at the top point, where 7 gauges do
+/// not constrain the discrepancy's Legendre terms and the mean extrapolates (6700 ± 3350 lbf/in
+/// against a true 0); and at a condition with a 0.8 in head, bands (scaled, like the
+/// discrepancy's prior, to the model's nearly vanishing force) narrower than the truth's
+/// discrepancy of under 1 lbf/in. A first version also asserted that half-width bands fail the
+/// bound; they did on its seeds (0.866) but not over the 12 data sets (0.942), so that
+/// assertion was removed rather than kept on a lucky seed.
 #[test]
 fn force_bands_carry_a_declared_tolerance_on_an_as_built_gate() {
     let setup = AsBuiltSkin::new();

@@ -427,12 +427,11 @@ fn anchor_of(
             .filter_map(|(e, &inside)| e.filter(|_| inside)),
     );
     // without an estimate in the calibration's windows there is no anchor: skip the fit
-    let profile = match (start, calibrated_rows.is_empty()) {
-        (Some(s), false) => {
-            window_estimate(inp, &calibrated_rows, grid_nodes, Some(s))?.map(|e| e.0)
-        }
-        _ => None,
+    let (Some(start), false) = (start, calibrated_rows.is_empty()) else {
+        log::debug!("track: not anchored (no window of the calibrated rows carries an estimate)");
+        return Ok(None);
     };
+    let profile = window_estimate(inp, &calibrated_rows, grid_nodes, Some(start))?.map(|e| e.0);
     let calibration = inp.model.theta_summary();
     Ok(anchor(calibration, profile, est, &in_calibration, smooth))
 }
