@@ -123,13 +123,14 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     check_prior_below(lo, hi, contact.gate().quoin_height)?;
     let bars: Arc<dyn Observer + Send + Sync> = Arc::new(Bars::new());
     let mut calibrator = calibrator(c, cal_cfg, contact, (lo, hi), seed)?;
-    if let (Some(drawing), false) = (built.config.as_ref(), tolerances.is_empty()) {
+    if let (Some(drawing), Some(file), false) = (
+        built.config.as_ref(),
+        c.tolerances.as_ref(),
+        tolerances.is_empty(),
+    ) {
         calibrator = calibrator
             .tolerances(&tolerances, drawing)
-            .with_context(|| {
-                let file = c.tolerances.as_deref().unwrap_or(std::path::Path::new(""));
-                format!("--tolerances {}", file.display())
-            })?;
+            .with_context(|| format!("--tolerances {}", file.display()))?;
     }
     let calibrator = calibrator.observer(bars);
     let model = calibrator.model();

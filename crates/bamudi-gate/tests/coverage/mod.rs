@@ -284,6 +284,10 @@ impl AsBuiltSkin {
             .check()
             .unwrap();
         let new_x = sample_levels(10, seed + 3);
+        let true_forces: Vec<Vec<f64>> = new_x
+            .iter()
+            .map(|xn| truth.forces(&self.truth_contact, *xn).unwrap())
+            .collect();
         let mut out = [SkinTally::default(); 2];
         let models = if both { 2 } else { 1 };
         for (k, model) in [&self.declared, &self.undeclared][..models]
@@ -295,8 +299,7 @@ impl AsBuiltSkin {
             let t = &mut out[k];
             t.covered = usize::from((s.ci95.0..=s.ci95.1).contains(&theta));
             let predictor = cal.predictor(*model).unwrap();
-            for xn in &new_x {
-                let f = truth.forces(&self.truth_contact, *xn).unwrap();
+            for (xn, f) in new_x.iter().zip(&true_forces) {
                 let band = predictor.response(xn).unwrap();
                 for p in 0..self.truth_contact.gate().n_points() {
                     let (m, lo, hi) = (band.mean[p], band.lower[p], band.upper[p]);
