@@ -1,5 +1,6 @@
 //! Criterion benchmarks for `bamudi`: the Module-3 likelihood (Eq. 40/51) at one `θ` for
-//! `N_e = 500`, `N_o = 7` (`N_s = 3500`), and the one-off Cholesky factorisation of `V`.
+//! `N_e = 500`, `N_o = 7` (`N_s = 3500`), alone and for 30 `θ` at once (the grid's batches), and
+//! the one-off Cholesky factorisation of `V`.
 use bamudi::module3::likelihood::{FactoredCovariance, assemble_covariance};
 use criterion::Criterion;
 use nalgebra::DMatrix;
@@ -40,6 +41,11 @@ pub fn benches(c: &mut Criterion) {
         .collect();
     g.bench_function("loglik_one_theta_3500", |bench| {
         bench.iter(|| f.log_density(&r).unwrap())
+    });
+    // a zoom pass of the grid at the default 241 nodes: 30 θ nodes evaluated as one batch
+    let batch = DMatrix::from_fn(3500, 30, |i, j| r[(i + 17 * j) % 3500]);
+    g.bench_function("loglik_30_theta_batched_3500", |bench| {
+        bench.iter(|| f.log_densities(&batch).unwrap())
     });
     g.finish();
 }

@@ -63,6 +63,85 @@ fn module3_likelihood_equals_brute_force_dense_evaluation() {
         "{ours} vs {brute}"
     );
     assert_eq!(fac.report().jitter, 0.0);
+    // the grid's batched form (one blocked solve for several θ's residuals) against the same
+    // brute force, column by column; the tolerance is the one above for the same reason
+    let resids = pseudo_random(n_e * n_o, 5, 7);
+    let batched = fac.log_densities(&resids).unwrap();
+    assert_eq!(batched.len(), 5);
+    for (c, got) in batched.iter().enumerate() {
+        let r = resids.column(c);
+        let want = -0.5 * (r.transpose() * &inv * r)[(0, 0)]
+            - 0.5 * det.ln()
+            - 0.5 * n_s * (2.0 * std::f64::consts::PI).ln();
+        assert!(
+            (got - want).abs() < 1e-9 * want.abs().max(1.0),
+            "column {c}: {got} vs {want}"
+        );
+    }
+    assert!(
+        fac.log_densities(&DMatrix::zeros(n_e * n_o - 1, 2))
+            .is_err()
+    );
+}
+
+/// The grid evaluates the dense likelihood of Module 3 (the paper's and the conditional mode)
+/// in batches: every node's residuals, then one blocked solve with the factor of `V`. On the
+/// beam application (data from a gap and `ρ` that no node equals, a covariance and a
+/// coefficient shift that are not the model's), the batch must give each node's values as
+/// `log_posteriors` gives them one at a time, and `-∞` outside the prior.
+#[test]
+fn batched_module3_nodes_equal_node_by_node_evaluation() {
+    use bamudi::module2::Problem;
+    use bamudi::module3::grid::LogPosteriors;
+    use bamudi::module3::{ThetaLikelihood, ThetaResiduals};
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let (n_e, n_o) = (30, beam_app::GAUGES_IN.len());
+    let (x, y) = beam_app::simulate(n_e, 12.3, 0.9, 1.0, 3);
+    let names = (
+        model.unobservable.input_names(),
+        model.observable.output_names(),
+    );
+    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    let cfg = CalibrationParams::default().check().unwrap();
+    let p = Problem::new(&model, &exps, &cfg, &Silent).unwrap();
+    let covs: Vec<DMatrix<f64>> = (0..p.parts.b.ncols())
+        .map(|k| spd(n_e, 40 + k as u64) * 0.01)
+        .collect();
+    let factor =
+        FactoredCovariance::new(&assemble_covariance(&p.parts.b, &covs, 1.0).unwrap(), "V")
+            .unwrap();
+    let lik = ThetaLikelihood {
+        res: ThetaResiduals {
+            p: &p,
+            rho: 0.95,
+            shift: pseudo_random(n_e, n_o, 5),
+            conditional: None,
+        },
+        factor: &factor,
+        sigma2: 1.0,
+    };
+    let nodes = [2.0, 5.5, 7.5, 12.0, 18.3, 24.9, 30.0];
+    let batched = lik.log_posteriors_at_nodes(&nodes, &Silent).unwrap();
+    assert_eq!(batched.len(), nodes.len());
+    for (t, got) in nodes.iter().zip(&batched) {
+        let want = lik.log_posteriors(&[*t]).unwrap();
+        if !want.0.is_finite() {
+            assert_eq!(*got, want, "θ = {t}");
+            continue;
+        }
+        // the same 210 x 210 triangular system summed in another order: round-off relative
+        // to the log density's size; the no-discrepancy value is computed identically
+        assert!(
+            (got.0 - want.0).abs() <= 1e-10 * want.0.abs().max(1.0),
+            "θ = {t}: {} vs {}",
+            got.0,
+            want.0
+        );
+        assert_eq!(got.1, want.1, "θ = {t}");
+    }
+    assert_eq!(batched[0].0, f64::NEG_INFINITY);
+    assert!(batched[1..6].iter().all(|v| v.0.is_finite()));
 }
 
 #[test]

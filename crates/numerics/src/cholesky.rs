@@ -163,6 +163,40 @@ impl Cholesky {
         Ok((0..n).map(|i| z[(i, 0)] * z[(i, 0)]).sum())
     }
 
+    /// `r_cᵀ (A + j I)⁻¹ r_c` for every column `r_c` of `r` (`n x m`), by one blocked
+    /// triangular solve `L Z = R` with faer's global parallelism. Equal to [`quad_form`] per
+    /// column up to round-off (the blocked solve sums in another order), and much cheaper per
+    /// column than `m` calls of it: a single-vector solve streams all of `L` from memory
+    /// (98 MB at `n` = 3500) for `n²` flops, the blocked one streams it once for all columns.
+    ///
+    /// [`quad_form`]: Self::quad_form
+    ///
+    /// ```
+    /// use nalgebra::DMatrix;
+    /// let a = DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0]);
+    /// let c = numerics::Cholesky::new(&a, "example").unwrap();
+    /// let r = DMatrix::from_column_slice(2, 2, &[2.0, 0.0, 0.0, 1.0]);
+    /// let q = c.quad_forms(&r).unwrap();
+    /// assert!((q[0] - c.quad_form(&[2.0, 0.0]).unwrap()).abs() < 1e-12);
+    /// assert!((q[1] - 0.5).abs() < 1e-12); // A⁻¹[1][1] = 4 / 8
+    /// ```
+    pub fn quad_forms(&self, r: &DMatrix<f64>) -> Result<Vec<f64>, NumericsError> {
+        let n = self.size();
+        if r.nrows() != n {
+            return Err(NumericsError::Dimension {
+                what: "rows of the vectors vs factor size".into(),
+                expected: n,
+                got: r.nrows(),
+            });
+        }
+        let mut z = Mat::from_fn(n, r.ncols(), |i, j| r[(i, j)]);
+        let par = faer::get_global_parallelism();
+        solve_lower_triangular_in_place(self.l.as_ref(), z.as_mut(), par);
+        Ok((0..r.ncols())
+            .map(|j| z.col(j).iter().map(|v| v * v).sum())
+            .collect())
+    }
+
     /// `(A + j I)⁻¹ B` for the columns of `b` (two triangular solves, faer's global
     /// parallelism).
     pub fn solve(&self, b: &DMatrix<f64>) -> Result<DMatrix<f64>, NumericsError> {
@@ -225,6 +259,39 @@ mod tests {
         let x = c.solve(&b).unwrap();
         // well conditioned (eigenvalues >= 0.1): round-off of a 20 x 20 solve
         assert!((&a * x - b).amax() < 1e-10);
+    }
+
+    #[test]
+    fn batched_quadratic_forms_match_one_solve_per_vector_and_the_inverse() {
+        let a = spd(40);
+        let c = Cholesky::new(&a, "a").unwrap();
+        let r = DMatrix::from_fn(40, 9, |i, j| ((i * 5 + j * 11) % 17) as f64 / 17.0 - 0.5);
+        let batched = c.quad_forms(&r).unwrap();
+        let inverse = a.clone().try_inverse().unwrap();
+        for (j, q) in batched.iter().enumerate() {
+            let col: Vec<f64> = r.column(j).iter().copied().collect();
+            let one = c.quad_form(&col).unwrap();
+            let direct = (r.column(j).transpose() * &inverse * r.column(j))[(0, 0)];
+            // the same triangular system summed in another order: relative round-off of a
+            // 40 x 40 solve with condition number <= 1e4 (eigenvalues >= 0.1, norm <= ~1e3)
+            assert!(
+                (q - one).abs() <= 1e-10 * one.abs().max(1.0),
+                "{q} vs {one}"
+            );
+            assert!(
+                (q - direct).abs() <= 1e-8 * direct.abs().max(1.0),
+                "{q} vs {direct}"
+            );
+        }
+        let wrong = DMatrix::zeros(39, 2);
+        assert!(matches!(
+            c.quad_forms(&wrong),
+            Err(NumericsError::Dimension {
+                expected: 40,
+                got: 39,
+                ..
+            })
+        ));
     }
 
     #[test]

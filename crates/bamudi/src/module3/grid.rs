@@ -16,6 +16,25 @@ use rayon::prelude::*;
 pub trait LogPosteriors: Sync {
     /// Evaluates both log posteriors at `θ`.
     fn log_posteriors(&self, theta: &[f64]) -> Result<(f64, f64)>;
+
+    /// Both log posteriors at each node of a one-dimensional `θ` grid, ticking `observer`
+    /// once per node (stage Module 3). The default evaluates the nodes one by one in
+    /// parallel; an evaluator whose nodes share a costly factor (the dense covariance of
+    /// Eq. 51) overrides it to batch the work on that factor.
+    fn log_posteriors_at_nodes(
+        &self,
+        nodes: &[f64],
+        observer: &dyn Observer,
+    ) -> Result<Vec<(f64, f64)>> {
+        nodes
+            .par_iter()
+            .map(|t| {
+                let r = self.log_posteriors(&[*t]);
+                tick(observer, Stage::Module3);
+                r
+            })
+            .collect()
+    }
 }
 
 /// Both posteriors: grid quadrature for one-dimensional `θ` (prior box `bounds`), adaptive
@@ -58,7 +77,7 @@ pub(crate) fn coarse_nodes(cfg: &CalibrationConfig) -> usize {
     (cfg.theta_grid_points.max(8) / 4).max(3)
 }
 
-/// Log posteriors (with, without discrepancy) at each node, in parallel.
+/// Log posteriors (with, without discrepancy) at each node ([`LogPosteriors::log_posteriors_at_nodes`]).
 fn evaluate_nodes(
     lp: &dyn LogPosteriors,
     nodes: &[f64],
@@ -68,14 +87,7 @@ fn evaluate_nodes(
         stage: Stage::Module3,
         work: nodes.len() as u64,
     });
-    nodes
-        .par_iter()
-        .map(|t| {
-            let r = lp.log_posteriors(&[*t]);
-            tick(observer, Stage::Module3);
-            r
-        })
-        .collect()
+    lp.log_posteriors_at_nodes(nodes, observer)
 }
 
 /// Exact grid quadrature with adaptive zoom: a quarter of `theta_grid_points` spread

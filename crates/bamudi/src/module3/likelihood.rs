@@ -126,6 +126,30 @@ impl FactoredCovariance {
             - 0.5 * self.factor.log_det()
             - 0.5 * n as f64 * (2.0 * std::f64::consts::PI).ln())
     }
+
+    /// [`log_density`](Self::log_density) of every column of `resids` (`N_s x m`, one
+    /// residual per candidate `θ`), by one blocked triangular solve
+    /// ([`numerics::Cholesky::quad_forms`]): the per-`θ` cost of the grid falls from a
+    /// memory-bound sweep over the whole factor to a share of one cache-blocked solve. Equal to
+    /// the one-by-one values up to round-off.
+    pub fn log_densities(&self, resids: &DMatrix<f64>) -> Result<Vec<f64>> {
+        let n = self.size();
+        if resids.nrows() != n {
+            return Err(BamudiError::dim(
+                "residuals vs covariance size",
+                n,
+                resids.nrows(),
+            ));
+        }
+        let constant =
+            -0.5 * self.factor.log_det() - 0.5 * n as f64 * (2.0 * std::f64::consts::PI).ln();
+        Ok(self
+            .factor
+            .quad_forms(resids)?
+            .into_iter()
+            .map(|quad| -0.5 * quad + constant)
+            .collect())
+    }
 }
 
 /// `ln N(r; 0, σ² I)`: the "without discrepancy" likelihood (Fig. 16 comparison).

@@ -18,6 +18,7 @@ use crate::error::Result;
 use crate::module2::gps::CoefficientGps;
 use crate::module2::training::XContext;
 use crate::module2::{Module2, Problem};
+use crate::observe::{Observer, Stage, tick};
 use coefficients::{CoefficientStrategy, Coefficients};
 use conditional::{ConditionalCoefficients, ModelRows, RhoProfile};
 use likelihood::{FactorReport, FactoredCovariance, assemble_covariance, iid_log_density};
@@ -259,5 +260,43 @@ impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
             lp + self.factor.log_density(&with)?,
             lp + iid_log_density(&without, self.sigma2),
         ))
+    }
+
+    /// The residuals of every node in parallel, then one blocked solve with the factor of `V`
+    /// for all of them ([`FactoredCovariance::log_densities`]); the same values as
+    /// [`log_posteriors`](Self::log_posteriors) node by node, up to round-off.
+    fn log_posteriors_at_nodes(
+        &self,
+        nodes: &[f64],
+        observer: &dyn Observer,
+    ) -> Result<Vec<(f64, f64)>> {
+        let per_node = nodes
+            .par_iter()
+            .map(|t| {
+                let lp = self.res.p.model.prior.ln_pdf(&[*t]);
+                let r = if lp.is_finite() {
+                    self.res.residuals(&[*t]).map(|(with, without)| {
+                        let iid = lp + iid_log_density(&without, self.sigma2);
+                        Some((lp, with, iid))
+                    })
+                } else {
+                    Ok(None)
+                };
+                tick(observer, Stage::Module3);
+                r
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let inside: Vec<&(f64, Vec<f64>, f64)> = per_node.iter().flatten().collect();
+        let n_s = self.factor.size();
+        let stacked = DMatrix::from_fn(n_s, inside.len(), |s, c| inside[c].1[s]);
+        // one value per column of `stacked`, so the iterator below never runs dry
+        let mut with = self.factor.log_densities(&stacked)?.into_iter();
+        Ok(per_node
+            .iter()
+            .map(|node| match node {
+                Some((lp, _, iid)) => (lp + with.next().unwrap_or(f64::NAN), *iid),
+                None => (f64::NEG_INFINITY, f64::NEG_INFINITY),
+            })
+            .collect())
     }
 }
