@@ -251,7 +251,7 @@ const TARGETS: &[(&str, &str, f64, f64)] = &[
         1e-3,
     ),
     (
-        "Module 3 log-likelihood per θ node at 3500 observations (30 nodes batched, as the grid evaluates them)",
+        "Module 3 dense log-likelihood per θ node at 3500 observations (30 nodes batched, as the grid evaluates them; paper and conditional modes)",
         "bamudi/loglik_30_theta_batched_3500",
         30.0,
         1e-3,

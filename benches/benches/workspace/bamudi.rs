@@ -42,7 +42,8 @@ pub fn benches(c: &mut Criterion) {
     g.bench_function("loglik_one_theta_3500", |bench| {
         bench.iter(|| f.log_density(&r).unwrap())
     });
-    // a zoom pass of the grid at the default 241 nodes: 30 θ nodes evaluated as one batch
+    // 30 θ nodes evaluated as one batch: a zoom pass for one posterior on the gate's 241-node
+    // grid (a pass holds 30 or 60 nodes; the coarse pass 60)
     let batch = DMatrix::from_fn(3500, 30, |i, j| r[(i + 17 * j) % 3500]);
     g.bench_function("loglik_30_theta_batched_3500", |bench| {
         bench.iter(|| f.log_densities(&batch).unwrap())

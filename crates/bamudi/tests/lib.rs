@@ -142,6 +142,30 @@ fn batched_module3_nodes_equal_node_by_node_evaluation() {
     }
     assert_eq!(batched[0].0, f64::NEG_INFINITY);
     assert!(batched[1..6].iter().all(|v| v.0.is_finite()));
+    // a pass with no node inside the prior solves with no column; an empty pass returns nothing
+    let outside = lik.log_posteriors_at_nodes(&[1.0, 40.0], &Silent).unwrap();
+    assert!(
+        outside
+            .iter()
+            .all(|v| *v == (f64::NEG_INFINITY, f64::NEG_INFINITY))
+    );
+    assert!(
+        lik.log_posteriors_at_nodes(&[], &Silent)
+            .unwrap()
+            .is_empty()
+    );
+    // a factor of another size than the residuals is an error, as node by node
+    let small = FactoredCovariance::new(&spd(n_e * n_o - 1, 3), "V").unwrap();
+    let mismatched = ThetaLikelihood {
+        factor: &small,
+        ..lik
+    };
+    assert!(
+        mismatched
+            .log_posteriors_at_nodes(&[12.0], &Silent)
+            .is_err()
+    );
+    assert!(mismatched.log_posteriors(&[12.0]).is_err());
 }
 
 #[test]

@@ -11,8 +11,9 @@
 //! all experiments and `b_k` the `k`-th column of `B`. Because `g_u` is deterministic, **`V` does
 //! not depend on `θ`** (only the mean `E_o(θ)` of Eq. 41/50 does): it is assembled and factored
 //! once (dense Cholesky through [`numerics::Cholesky`], with its jitter ladder), its
-//! log-determinant stored, and each `θ` costs one triangular solve, `O(N_s²)`, plus the `N_e`
-//! evaluations of `g_u` for the mean.
+//! log-determinant stored, and each `θ` costs a triangular solve, `O(N_s²)`, plus the `N_e`
+//! evaluations of `g_u` for the mean. The grid solves for all nodes of a pass at once
+//! ([`FactoredCovariance::log_densities`]), which reads the factor once instead of once per node.
 
 use crate::error::{BamudiError, Result};
 use nalgebra::DMatrix;
@@ -111,7 +112,8 @@ impl FactoredCovariance {
     }
 
     /// `ln N(r; 0, V) = −½ rᵀ V⁻¹ r − ½ ln|V| − (N_s/2) ln 2π` for a residual `r = y − E_o(θ)`
-    /// (one sequential triangular solve: callers evaluate many `θ` in parallel).
+    /// (one sequential triangular solve, for a single `θ`; the grid uses
+    /// [`log_densities`](Self::log_densities) for its nodes).
     pub fn log_density(&self, resid: &[f64]) -> Result<f64> {
         let n = self.size();
         if resid.len() != n {

@@ -288,6 +288,13 @@ impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
             .collect::<Result<Vec<_>>>()?;
         let inside: Vec<&(f64, Vec<f64>, f64)> = per_node.iter().flatten().collect();
         let n_s = self.factor.size();
+        if let Some(node) = inside.iter().find(|node| node.1.len() != n_s) {
+            return Err(crate::error::BamudiError::dim(
+                "residual vs covariance size",
+                n_s,
+                node.1.len(),
+            ));
+        }
         let stacked = DMatrix::from_fn(n_s, inside.len(), |s, c| inside[c].1[s]);
         // one value per column of `stacked`, so the iterator below never runs dry
         let mut with = self.factor.log_densities(&stacked)?.into_iter();
