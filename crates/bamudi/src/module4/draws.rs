@@ -280,7 +280,14 @@ fn covariance_factor(cov: &nalgebra::DMatrix<f64>, x: &[f64]) -> Result<nalgebra
     let max = eig.values.iter().copied().fold(0.0f64, f64::max);
     let min = eig.values.iter().copied().fold(f64::INFINITY, f64::min);
     if min < -INDEFINITE_TOLERANCE * max {
-        return Err(chol_err.into());
+        return Err(BamudiError::Numerical {
+            context: format!("{what} = {x:?}"),
+            reason: format!(
+                "smallest eigenvalue {min:.3e} against a largest of {max:.3e}, beyond the \
+                 {INDEFINITE_TOLERANCE:e} that the low-rank prior's truncation explains \
+                 ({chol_err})"
+            ),
+        });
     }
     log::warn!(
         "{what} {x:?} is indefinite (smallest eigenvalue {min:.3e}, largest {max:.3e}); the \
@@ -317,7 +324,13 @@ mod tests {
         let f = covariance_factor(&with([4.0, 1.0, -1e-3]), &[0.0]).unwrap();
         // F Fᵀ is the matrix with the negative eigenvalue set to zero (round-off only)
         assert!((&f * f.transpose() - with([4.0, 1.0, 0.0])).amax() < 1e-12);
-        assert!(covariance_factor(&with([4.0, 1.0, -0.1]), &[0.0]).is_err());
+        // the refusal names the input and both eigenvalues (a user's only lead)
+        let e = covariance_factor(&with([4.0, 1.0, -0.1]), &[7.5]).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("[7.5]") && text.contains("-1.000e-1") && text.contains("4.000e0"),
+            "{text}"
+        );
         // positive definite: the Cholesky factor, as before
         let c = with([4.0, 1.0, 0.5]);
         let l = covariance_factor(&c, &[0.0]).unwrap();
