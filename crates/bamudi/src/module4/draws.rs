@@ -260,11 +260,12 @@ pub fn empirical_band(mut values: Vec<Vec<f64>>) -> Band {
 
 /// Largest negative eigenvalue, relative to the largest, that [`covariance_factor`] sets to
 /// zero. The marginal mode's coefficient covariance at `x` is the prior minus what the data
-/// explain, with the prior's kernel matrix at the experiments truncated to its leading
-/// eigenvalues (`module3::marginal::lowrank`): where the data pin a direction down, the
-/// subtraction can overshoot the prior by the truncated mass (measured: −4.3e-5 of the largest
-/// eigenvalue at a low-head experiment of an as-built gate, where `bamudi predict` failed
-/// before). Anything more negative is not truncation and stays an error.
+/// explain (`MarginalState::coefficient_cov`, in the eigenbasis of the low-rank prior): where
+/// the data pin a direction down, that subtraction leaves rounding at the prior's scale, which
+/// can exceed the small posterior eigenvalues (measured: −4.3e-5 of the largest at a low-head
+/// experiment of an as-built gate, where `bamudi predict` failed before; up to −6e-5 on the
+/// FE-gate close-loop records of 2026-11-28). Anything more negative is not rounding and
+/// stays an error.
 const INDEFINITE_TOLERANCE: f64 = 1e-3;
 
 /// A factor `F` with `F Fᵀ = cov`: the Cholesky factor, or, when `cov` is indefinite by

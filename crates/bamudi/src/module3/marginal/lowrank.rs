@@ -232,6 +232,14 @@ fn gram(factors: &[DMatrix<f64>], b: &DMatrix<f64>, offsets: &[usize]) -> DMatri
     out
 }
 
+/// Eigenvalues of `WᵀW` (or `W Wᵀ`) below this fraction of the largest are null directions
+/// in [`Spectrum::explained`]: rounding puts the eigenvalues of exactly null directions near
+/// `1e-16 · R · λ_max`, and a projection's rounding `ε |W| |C|` divided by such a `λ_j` would
+/// swamp the result. A genuine direction dropped here could have explained at most
+/// `t λ_j ≤ 1e-12 t λ_max` of its prior variance: the posterior is then slightly wider, never
+/// narrower.
+pub const NULL_DIRECTION: f64 = 1e-12;
+
 /// The spectrum of `W`: `WᵀW = Q Λ Qᵀ`, equivalently `W Wᵀ = P Λ Pᵀ` with `W Q = P Λ^{1/2}`
 /// on the non-zero eigenvalues. With it, for `V = s W Wᵀ + σ² I` and `t = s/σ²`,
 /// `V⁻¹ = σ⁻² (I − t W Q (I + tΛ)⁻¹ Qᵀ Wᵀ)` and `ln|V| = N_s ln σ² + Σ ln(1 + tλ)` for every
@@ -368,6 +376,22 @@ impl Spectrum {
     /// `(Qᵀa)ᵀ (I + tΛ)⁻¹ (Qᵀb)` from projected `qa`, `qb`.
     pub fn core(&self, qa: &DMatrix<f64>, qb: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
         qa.tr_mul(&self.shrink(qb, t))
+    }
+
+    /// `Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` over the rows `z_j` of `qz = Qᵀ Wᵀ Cᵀ`
+    /// ([`project_cross`](Self::project_cross)) whose `λ_j` exceeds [`NULL_DIRECTION`] times
+    /// the largest: `s C V⁻¹ Cᵀ` for cross covariances `Cᵀ = W G` in the span of `W`
+    /// (`qz_j = λ_j (QᵀG)_j`), and their posterior-explained part otherwise. Every term is
+    /// non-negative and bounded by `(QᵀG)_j²`: no cancellation (compare
+    /// [`gram`](Self::gram), which subtracts).
+    pub fn explained(&self, qz: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
+        let cut = NULL_DIRECTION * self.lambda.iter().copied().fold(0.0f64, f64::max);
+        let weight = self.lambda.map(|l| match l > cut {
+            true => t / (l * (1.0 + t * l)),
+            false => 0.0,
+        });
+        let scaled = DMatrix::from_fn(qz.nrows(), qz.ncols(), |j, c| qz[(j, c)] * weight[j]);
+        qz.tr_mul(&scaled)
     }
 
     /// `(I + tΛ)⁻¹ z`.

@@ -1123,6 +1123,85 @@ mod tests {
         }
     }
 
+    /// Module 4's coefficient covariance stays a covariance when the data are informative:
+    /// gate-like magnitudes (coefficient scales 6e3 lbf/in, level variance 1e3, `b` entries
+    /// about 0.03 µε per lbf/in, 1 µε noise, 60 experiments: `t λ_max` about 1e10). Asserted:
+    /// the posterior is positive semi-definite and below the prior (the data never add
+    /// variance), both to 1e-9 of the prior's size (rounding of a subtraction at that
+    /// scale). Woodbury's form `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z)/σ²`, which `coefficient_cov` used
+    /// before, is computed beside it to show the check has power here: its smallest
+    /// eigenvalue is −1.4e-5 of the prior's size (measured when written; the FE-gate record
+    /// that stopped `bamudi close-loop` reached −1.2 of the largest).
+    #[test]
+    fn module4_coefficient_covariance_is_a_covariance_with_informative_data() {
+        let n_e = 60;
+        let x = DMatrix::from_fn(n_e, 1, |i, _| i as f64 / 10.0);
+        let prior = CoefficientPrior {
+            kernel: gp::Kernel::Matern52 { ard: false },
+            length_scales: vec![0.8],
+            level_variance: 1e3,
+        };
+        let b = DMatrix::from_fn(7, 3, |q, k| {
+            0.03 * (((q * 3 + k * 5) % 7) as f64 / 3.0 - 1.0)
+        });
+        let parts = LinearParts {
+            a: b.clone(),
+            l: DMatrix::identity(3, 3),
+            b: b.clone(),
+        };
+        let amps = DMatrix::from_fn(n_e, 3, |i, k| 6e3 * (1.0 + 0.01 * (i + k) as f64));
+        let (s, sigma2) = (1.0, 1.0);
+        let fit = MarginalFit {
+            priors: vec![prior.clone(); 3],
+            amplitude: s,
+            length_scale_factor: 1.0,
+            rho_prior: (0.0, 1.0),
+            rho_mean: 0.5,
+            rho_sd: 0.1,
+            rank: 0,
+            amplitudes: amps,
+            support: None,
+            support_theta: vec![0.0],
+            nodes: Vec::new(),
+            tolerances: Vec::new(),
+            tolerance_columns: None,
+        };
+        let state = MarginalState::new(&fit, &x, &parts, sigma2).unwrap();
+        let mut woodbury_worst = 0.0f64;
+        for xs in [0.05, 2.33, 5.9, 7.5] {
+            let ax = [6e3, 5e3, 7e3];
+            let cmat = fit.cross_cov(&[xs], &ax, &x);
+            let post = state.coefficient_cov(&fit, &[xs], &ax, &cmat);
+            let prior_cov = DMatrix::from_fn(3, 3, |a, c| match a == c {
+                true => s * ax[a] * ax[a] * prior.cov(&[xs], &[xs]),
+                false => 0.0,
+            });
+            let scale = prior_cov.amax();
+            let min_eig =
+                |m: &DMatrix<f64>| numerics::SymmetricEigen::new(m, "m").unwrap().values[0];
+            assert!(min_eig(&post) >= -1e-9 * scale, "x {xs}: {post}");
+            assert!(
+                min_eig(&(&prior_cov - &post)) >= -1e-9 * scale,
+                "x {xs}: {post}"
+            );
+            // the former Woodbury form, for the record of this test's power
+            let cov = state.covariance();
+            let bb = b.transpose() * &b;
+            let cc = DMatrix::from_fn(3, 3, |i, j| {
+                cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
+            });
+            let qz = cov.spectrum.project_cross(&cov.lr, &cmat);
+            let q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / sigma2;
+            let woodbury = &prior_cov - q * (s * s);
+            woodbury_worst = woodbury_worst.min(min_eig(&woodbury) / scale);
+        }
+        eprintln!("former Woodbury form: smallest eigenvalue / prior scale {woodbury_worst:e}");
+        assert!(
+            woodbury_worst < -1e-6,
+            "the former form held here too: {woodbury_worst:e}"
+        );
+    }
+
     /// Module 4's coefficient covariance with declared tolerances,
     /// `s P − s² Cy V'⁻¹ Cyᵀ` from the stored fit, equals the dense computation with
     /// `V' = V + J Jᵀ`; without the Woodbury term it would not (the test's `J` moves it by

@@ -12,8 +12,6 @@ pub struct MarginalState {
     cov: Covariance,
     l: DMatrix<f64>,
     b: DMatrix<f64>,
-    /// `Bᵀ B` (`K x K`), used at every prediction input.
-    btb: DMatrix<f64>,
     /// With declared tolerances: `(I ⊗ b_kᵀ) V⁻¹ J_p` per tolerance (`N_e x K` each) and
     /// `M⁻¹ = (I + Jᵀ V⁻¹ J)⁻¹`, the Woodbury terms of `V' = V + J Jᵀ`.
     tolerance_terms: Option<(Vec<DMatrix<f64>>, DMatrix<f64>)>,
@@ -52,7 +50,6 @@ impl MarginalState {
         };
         Ok(Self {
             cov,
-            btb: b.transpose() * &b,
             l,
             b,
             tolerance_terms,
@@ -74,6 +71,19 @@ impl MarginalState {
     /// every `θ` and `ρ`): `s P − s² Cy V'⁻¹ Cyᵀ` (`V' = V + J Jᵀ` with declared tolerances), with `P` the prior correlation at `x`
     /// scaled by `ax`, `Cy` the prior covariance between the coefficients at `x` and the
     /// observations, and `cmat[:, k] = C_k(x, X)` ([`MarginalFit::cross_cov`]).
+    ///
+    /// `s² Cy V⁻¹ Cyᵀ` is taken in the eigenbasis of `W` ([`Spectrum::explained`]):
+    /// `s Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` with `z = Qᵀ Wᵀ Cᵀ`. Woodbury's form
+    /// `(C Cᵀ − t zᵀ (I + tΛ)⁻¹ z) / σ²` subtracts two terms `tλ_max` times larger than their
+    /// difference; with informative data (`tλ_max` ≈ 1e12) the rounding of that subtraction
+    /// made the posterior grossly indefinite (smallest eigenvalue −7.3e13 against a largest
+    /// 5.9e13 on an FE-gate record with thermal strain, which stopped `bamudi close-loop`).
+    /// The eigen-form has no such cancellation, and it leaves out the part of `Cᵀ` outside the
+    /// span of `W` (the kernel's truncated eigen-directions), which the data were never
+    /// conditioned on: what remains is the posterior of the truncated prior, a covariance (the
+    /// Nyström inequality), so it is positive semi-definite up to rounding of the prior's size.
+    ///
+    /// [`Spectrum::explained`]: super::Spectrum::explained
     pub fn coefficient_cov(
         &self,
         fit: &MarginalFit,
@@ -83,22 +93,19 @@ impl MarginalState {
     ) -> DMatrix<f64> {
         let (cov, s) = (&self.cov, fit.amplitude);
         let k = fit.priors.len();
-        let bb = &self.btb;
-        let cc = DMatrix::from_fn(k, k, |i, j| {
-            cmat.column(i).dot(&cmat.column(j)) * bb[(i, j)]
-        });
         let qz = cov.spectrum.project_cross(&cov.lr, cmat);
-        let mut q = (cc - cov.spectrum.core(&qz, &qz, cov.t()) * cov.t()) / cov.sigma2;
+        // s² Cy V⁻¹ Cyᵀ, without Woodbury's cancellation (see above)
+        let mut explained = cov.spectrum.explained(&qz, cov.t()) * s;
         if let Some((per_coef, m_inv)) = &self.tolerance_terms {
             // Woodbury: Cy V'⁻¹ Cyᵀ = Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = Cy V⁻¹ J (per unit s)
             let d = cy_vinv_j(per_coef, cmat);
-            q -= &d * m_inv * d.transpose();
+            explained -= &d * m_inv * d.transpose() * (s * s);
         }
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
             true => ax[i] * ax[i] * fit.priors[i].cov(x, x),
             false => 0.0,
         });
-        prior * s - q * (s * s)
+        prior * s - explained
     }
 
     /// With declared tolerances, their deviations' joint posterior with the coefficients at
