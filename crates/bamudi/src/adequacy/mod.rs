@@ -587,8 +587,8 @@ fn identifiability(
         reason: "no right singular vectors".into(),
     })?;
     let x: Vec<f64> = cal.x_experiments().row(i_ref).iter().copied().collect();
-    let cmat = fit.cross_cov(&x, &ax, cal.x_experiments());
-    let post = state.coefficient_cov(fit, &x, &ax, &cmat);
+    let cross = state.cross_cov(fit, &x, &ax, cal.x_experiments());
+    let post = state.coefficient_cov(fit, &x, &ax, &cross);
     let scale = DMatrix::from_fn(ax.len(), ax.len(), |i, j| match (i == j, ax[i] > 0.0) {
         (true, true) => 1.0 / ax[i],
         _ => 0.0,

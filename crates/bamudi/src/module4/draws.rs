@@ -261,11 +261,11 @@ pub fn empirical_band(mut values: Vec<Vec<f64>>) -> Band {
 /// Largest negative eigenvalue, relative to the largest, that [`covariance_factor`] sets to
 /// zero. The marginal mode's coefficient covariance at `x` is the prior minus what the data
 /// explain (`MarginalState::coefficient_cov`, in the eigenbasis of the low-rank prior): where
-/// the data pin a direction down, that subtraction leaves rounding at the prior's scale, which
-/// can exceed the small posterior eigenvalues (measured: −4.3e-5 of the largest at a low-head
-/// experiment of an as-built gate, where `bamudi predict` failed before; up to −6e-5 on the
-/// FE-gate close-loop records of 2026-11-28). Anything more negative is not rounding and
-/// stays an error.
+/// the data pin a direction down, the numerical error of that subtraction and of the
+/// eigen-decompositions behind it can exceed the small posterior eigenvalues (measured:
+/// −4.3e-5 of the largest at a low-head experiment of an as-built gate, where `bamudi
+/// predict` failed before). Anything more negative is not numerical error and stays an
+/// error.
 const INDEFINITE_TOLERANCE: f64 = 1e-3;
 
 /// A factor `F` with `F Fᵀ = cov`: the Cholesky factor, or, when `cov` is indefinite by

@@ -343,16 +343,19 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     fn marginal_coef_at(&self, view: &MarginalView<'_>, x: &[f64]) -> Result<CoefAt> {
         let ax = self.coefficient_scales(view.fit, x)?;
-        let cmat = view.fit.cross_cov(x, &ax, self.cal.x_experiments());
+        let cross = view
+            .state
+            .cross_cov(view.fit, x, &ax, self.cal.x_experiments());
+        let cmat = &cross.cmat;
         let (mut mean, mut slope, mut rho) = (vec![], vec![], vec![]);
         for node in &view.nodes {
-            let (m, s) = view.fit.coefficient_mean(node, &cmat, node.rho_mean);
+            let (m, s) = view.fit.coefficient_mean(node, cmat, node.rho_mean);
             mean.push(m);
             slope.push(s);
             rho.push((node.rho_mean, node.rho_var));
         }
-        let cov = view.state.coefficient_cov(view.fit, x, &ax, &cmat);
-        let tolerance = match view.state.tolerance_cross(view.fit, &cmat) {
+        let cov = view.state.coefficient_cov(view.fit, x, &ax, &cross);
+        let tolerance = match view.state.tolerance_cross(view.fit, cmat) {
             None => None,
             Some((cross, m_inv)) => Some(ToleranceAt {
                 mean: tolerance_means(view.fit, m_inv.nrows())?,

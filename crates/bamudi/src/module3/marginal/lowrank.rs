@@ -90,6 +90,37 @@ impl LowRank {
         self.offsets.last().copied().unwrap_or(0)
     }
 
+    /// Coordinates in coefficient `k`'s factor columns (`F_k = [U_k Λ_k^{1/2}, √c a]`) of
+    /// its cross covariance with an input: the correlation part `corr` (`N_e`) projected
+    /// orthogonally onto the kept eigenvectors (the columns of `U_k Λ_k^{1/2}` are orthogonal:
+    /// `f_jᵀ corr / |f_j|²`), and `level` (`ax √c`) on the level's column when there is one.
+    pub fn factor_coordinates(
+        &self,
+        k: usize,
+        corr: &DVector<f64>,
+        level: Option<f64>,
+    ) -> DVector<f64> {
+        let f = &self.factors[k];
+        let n_corr = f.ncols() - usize::from(level.is_some() && f.ncols() > 0);
+        let mut g = DVector::zeros(f.ncols());
+        for j in 0..n_corr {
+            let col = f.column(j);
+            let norm2 = col.norm_squared();
+            if norm2 > 0.0 {
+                g[j] = col.dot(corr) / norm2;
+            }
+        }
+        if let (Some(v), true) = (level, n_corr < f.ncols()) {
+            g[n_corr] = v;
+        }
+        g
+    }
+
+    /// Coefficient `k`'s factor `F_k` (`N_e x r_k`) and the row of its first column in `W`.
+    pub fn factor(&self, k: usize) -> (&DMatrix<f64>, usize) {
+        (&self.factors[k], self.offsets[k])
+    }
+
     /// `B` as seen by this factor.
     pub fn b(&self) -> &DMatrix<f64> {
         &self.b
@@ -232,12 +263,10 @@ fn gram(factors: &[DMatrix<f64>], b: &DMatrix<f64>, offsets: &[usize]) -> DMatri
     out
 }
 
-/// Eigenvalues of `WᵀW` (or `W Wᵀ`) below this fraction of the largest are null directions
-/// in [`Spectrum::explained`]: rounding puts the eigenvalues of exactly null directions near
-/// `1e-16 · R · λ_max`, and a projection's rounding `ε |W| |C|` divided by such a `λ_j` would
-/// swamp the result. A genuine direction dropped here could have explained at most
-/// `t λ_j ≤ 1e-12 t λ_max` of its prior variance: the posterior is then slightly wider, never
-/// narrower.
+/// Eigenvalues of `W Wᵀ` below this fraction of the largest are null directions in the dual
+/// form of [`Spectrum::explained`]: rounding puts the eigenvalues of exactly null directions
+/// near `1e-16 · N_s · λ_max`, and their weight `1/λ_j` would amplify rounding. `W G` lies in
+/// the span of the others, so only rounding is dropped.
 pub const NULL_DIRECTION: f64 = 1e-12;
 
 /// The spectrum of `W`: `WᵀW = Q Λ Qᵀ`, equivalently `W Wᵀ = P Λ Pᵀ` with `W Q = P Λ^{1/2}`
@@ -378,20 +407,26 @@ impl Spectrum {
         qa.tr_mul(&self.shrink(qb, t))
     }
 
-    /// `Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` over the rows `z_j` of `qz = Qᵀ Wᵀ Cᵀ`
-    /// ([`project_cross`](Self::project_cross)) whose `λ_j` exceeds [`NULL_DIRECTION`] times
-    /// the largest: `s C V⁻¹ Cᵀ` for cross covariances `Cᵀ = W G` in the span of `W`
-    /// (`qz_j = λ_j (QᵀG)_j`), and their posterior-explained part otherwise. Every term is
-    /// non-negative and bounded by `(QᵀG)_j²`: no cancellation (compare
-    /// [`gram`](Self::gram), which subtracts).
-    pub fn explained(&self, qz: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
-        let cut = NULL_DIRECTION * self.lambda.iter().copied().fold(0.0f64, f64::max);
-        let weight = self.lambda.map(|l| match l > cut {
-            true => t / (l * (1.0 + t * l)),
-            false => 0.0,
-        });
-        let scaled = DMatrix::from_fn(qz.nrows(), qz.ncols(), |j, c| qz[(j, c)] * weight[j]);
-        qz.tr_mul(&scaled)
+    /// `s C V⁻¹ Cᵀ` for cross covariances `Cᵀ = W G` given by their coordinates `G`
+    /// (`R x K`, [`LowRank::factor_coordinates`]): `yᵀ diag(tλ/(1 + tλ)) y` with `y = QᵀG`
+    /// in the primal form, `Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` with `z = Λ^{1/2} Pᵀ W G` in
+    /// the dual one (over `λ_j > NULL_DIRECTION · λ_max`; `W G` has no part outside them).
+    /// Every term is non-negative and at most `y_j²`: unlike Woodbury's
+    /// `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z) / σ²`, nothing large is subtracted.
+    pub fn explained(&self, lr: &LowRank, g: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
+        let (y, weight) = match &self.basis {
+            Basis::Primal { qt, .. } => (qt * g, self.lambda.map(|l| t * l / (1.0 + t * l))),
+            Basis::Dual { wqt, .. } => {
+                let cut = NULL_DIRECTION * self.lambda.iter().copied().fold(0.0f64, f64::max);
+                let weight = self.lambda.map(|l| match l > cut {
+                    true => t / (l * (1.0 + t * l)),
+                    false => 0.0,
+                });
+                (wqt * lr.w(g), weight)
+            }
+        };
+        let scaled = DMatrix::from_fn(y.nrows(), y.ncols(), |j, c| y[(j, c)] * weight[j]);
+        y.tr_mul(&scaled)
     }
 
     /// `(I + tΛ)⁻¹ z`.

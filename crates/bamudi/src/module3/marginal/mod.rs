@@ -91,7 +91,7 @@ mod rho;
 mod state;
 
 pub use lowrank::{LowRank, Spectrum};
-pub use state::MarginalState;
+pub use state::{CrossCov, MarginalState};
 
 use super::grid::{self, LogPosteriors, coarse_nodes};
 use super::likelihood::{FactorReport, iid_log_density};
@@ -1054,6 +1054,20 @@ mod tests {
         close(&zzt(&dual), &zzt(&primal), "Z Zᵀ");
         let (ld, lp) = (dual.log_det(24, t, sigma2), primal.log_det(24, t, sigma2));
         assert!((ld - lp).abs() < 1e-9 * lp.abs().max(1.0), "{ld} vs {lp}");
+        // Module 4's explained part `t Gᵀ M (I + tM)⁻¹ G` (`M = WᵀW`) from coordinates `G`, in
+        // both forms against a dense solve (the dual form weights `1/λ`: a wrong power of `Λ`
+        // or a missing cut would show here)
+        let r = lr.rank();
+        let g = DMatrix::from_fn(r, 3, |i, k| ((i * 3 + k * 7) % 11) as f64 / 11.0 - 0.4);
+        let w = lr.w(&DMatrix::identity(r, r));
+        let m = w.tr_mul(&w);
+        let solved = (&m * t + DMatrix::identity(r, r))
+            .lu()
+            .solve(&(&m * &g))
+            .unwrap();
+        let dense = g.tr_mul(&solved) * t;
+        close(&dual.explained(&lr, &g, t), &dense, "explained (dual)");
+        close(&primal.explained(&lr, &g, t), &dense, "explained (primal)");
     }
 
     /// With declared tolerances `V' = V + J Jᵀ`: the Woodbury forms (solves, the Gram matrix
@@ -1170,8 +1184,9 @@ mod tests {
         let mut woodbury_worst = 0.0f64;
         for xs in [0.05, 2.33, 5.9, 7.5] {
             let ax = [6e3, 5e3, 7e3];
+            let cross = state.cross_cov(&fit, &[xs], &ax, &x);
+            let post = state.coefficient_cov(&fit, &[xs], &ax, &cross);
             let cmat = fit.cross_cov(&[xs], &ax, &x);
-            let post = state.coefficient_cov(&fit, &[xs], &ax, &cmat);
             let prior_cov = DMatrix::from_fn(3, 3, |a, c| match a == c {
                 true => s * ax[a] * ax[a] * prior.cov(&[xs], &[xs]),
                 false => 0.0,
@@ -1242,7 +1257,11 @@ mod tests {
         let state = MarginalState::new(&fit, &x, &parts, sigma2).unwrap();
         let (xs, ax) = ([1.7], [1.1, 0.9]);
         let cmat = fit.cross_cov(&xs, &ax, &x);
-        let ours = state.coefficient_cov(&fit, &xs, &ax, &cmat);
+        let cross = state.cross_cov(&fit, &xs, &ax, &x);
+        // every eigen-pair of the 8 x 8 kernel matrices is kept here, so the consistent cross
+        // covariances are the exact kernel's (to rounding) and the dense reference applies
+        assert!((&cross.cmat - &cmat).amax() < 1e-9 * cmat.amax());
+        let ours = state.coefficient_cov(&fit, &xs, &ax, &cross);
         // dense: V' and Cy (K x N_s) with Cy[k, (i, q)] = s cmat[i, k] B[q, k]
         let k = prior.matrix(&x, &x);
         let b = &parts.b;

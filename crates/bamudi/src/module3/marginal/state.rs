@@ -17,6 +17,16 @@ pub struct MarginalState {
     tolerance_terms: Option<(Vec<DMatrix<f64>>, DMatrix<f64>)>,
 }
 
+/// The prior covariances between the coefficients at one input and at the experiments
+/// ([`MarginalState::cross_cov`]).
+#[derive(Debug, Clone)]
+pub struct CrossCov {
+    /// `C_k(x, x_i)` (`N_e x K`).
+    pub cmat: DMatrix<f64>,
+    /// Their coordinates `G` in the columns of `W` (`R x K`): `cmat[:, k] ⊗ b_k = W G[:, k]`.
+    pub coords: DMatrix<f64>,
+}
+
 impl MarginalState {
     /// Rebuilds the factorisation of `V` for the experiments `x`, the model's parts and `σ²`.
     pub fn new(
@@ -56,6 +66,42 @@ impl MarginalState {
         })
     }
 
+    /// The prior covariances between the coefficients at `x` (scales `ax`) and at the
+    /// experiments, consistent with the truncated prior the data were conditioned on
+    /// ([`LowRank`] keeps each kernel matrix's leading eigen-pairs): each coefficient's
+    /// correlation part projected onto its kept eigenvectors, its level part exact
+    /// ([`LowRank::factor_coordinates`]). [`MarginalFit::cross_cov`] is the exact kernel's.
+    pub fn cross_cov(
+        &self,
+        fit: &MarginalFit,
+        x: &[f64],
+        ax: &[f64],
+        experiments: &DMatrix<f64>,
+    ) -> CrossCov {
+        let lr = &self.cov.lr;
+        let n_e = experiments.nrows();
+        let rows: Vec<Vec<f64>> = (0..n_e)
+            .map(|i| experiments.row(i).iter().copied().collect())
+            .collect();
+        let mut cross = CrossCov {
+            cmat: DMatrix::zeros(n_e, fit.priors.len()),
+            coords: DMatrix::zeros(lr.rank(), fit.priors.len()),
+        };
+        for (k, prior) in fit.priors.iter().enumerate() {
+            let scale = |i: usize| ax[k] * fit.amplitudes[(i, k)];
+            let corr = DVector::from_fn(n_e, |i, _| scale(i) * prior.correlation(x, &rows[i]));
+            let level = (prior.level_variance > 0.0).then(|| ax[k] * prior.level_variance.sqrt());
+            let g = lr.factor_coordinates(k, &corr, level);
+            let (f, offset) = lr.factor(k);
+            cross.cmat.set_column(k, &(f * &g));
+            cross
+                .coords
+                .view_mut((offset, k), (g.len(), 1))
+                .copy_from(&g);
+        }
+        cross
+    }
+
     /// The factored marginal covariance `V` of the observations.
     pub(crate) fn covariance(&self) -> &Covariance {
         &self.cov
@@ -70,18 +116,20 @@ impl MarginalState {
     /// Posterior covariance of the coefficients at `x` given the data (`K x K`; the same at
     /// every `θ` and `ρ`): `s P − s² Cy V'⁻¹ Cyᵀ` (`V' = V + J Jᵀ` with declared tolerances), with `P` the prior correlation at `x`
     /// scaled by `ax`, `Cy` the prior covariance between the coefficients at `x` and the
-    /// observations, and `cmat[:, k] = C_k(x, X)` ([`MarginalFit::cross_cov`]).
+    /// observations, from `cross` ([`cross_cov`](Self::cross_cov): consistent with the
+    /// truncated prior the data were conditioned on).
     ///
-    /// `s² Cy V⁻¹ Cyᵀ` is taken in the eigenbasis of `W` ([`Spectrum::explained`]):
-    /// `s Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` with `z = Qᵀ Wᵀ Cᵀ`. Woodbury's form
-    /// `(C Cᵀ − t zᵀ (I + tΛ)⁻¹ z) / σ²` subtracts two terms `tλ_max` times larger than their
-    /// difference; with informative data (`tλ_max` ≈ 1e12) the rounding of that subtraction
-    /// made the posterior grossly indefinite (smallest eigenvalue −7.3e13 against a largest
-    /// 5.9e13 on an FE-gate record with thermal strain, which stopped `bamudi close-loop`).
-    /// The eigen-form has no such cancellation, and it leaves out the part of `Cᵀ` outside the
-    /// span of `W` (the kernel's truncated eigen-directions), which the data were never
-    /// conditioned on: what remains is the posterior of the truncated prior, a covariance (the
-    /// Nyström inequality), so it is positive semi-definite up to rounding of the prior's size.
+    /// `s² Cy V⁻¹ Cyᵀ` is taken from the coordinates `G` of `Cᵀ = W G` in the eigenbasis of
+    /// `W` ([`Spectrum::explained`]), a sum of non-negative terms. Woodbury's form
+    /// `(C Cᵀ − t zᵀ (I + tΛ)⁻¹ z) / σ²`, used before, subtracts two terms up to `tλ_max` times
+    /// larger than their difference, and it took `C` from the exact kernel, whose part outside
+    /// the span of `W` (the truncated eigen-directions) the data were never conditioned on
+    /// and which it amplified by `t`. With informative data the result was grossly
+    /// indefinite (smallest eigenvalue −7.3e13 against a largest 5.9e13 on an FE-gate record
+    /// with thermal strain, which stopped `bamudi close-loop`). Now the joint prior of `α(x)`
+    /// and the data is that of the truncated process (correlation part: the Nyström inequality
+    /// `k(x,x) ≥ k(x,X) U Λ⁻¹ Uᵀ k(X,x)`; level part: exact), so in exact arithmetic the
+    /// result is a posterior covariance: positive semi-definite and below the prior.
     ///
     /// [`Spectrum::explained`]: super::Spectrum::explained
     pub fn coefficient_cov(
@@ -89,16 +137,15 @@ impl MarginalState {
         fit: &MarginalFit,
         x: &[f64],
         ax: &[f64],
-        cmat: &DMatrix<f64>,
+        cross: &CrossCov,
     ) -> DMatrix<f64> {
         let (cov, s) = (&self.cov, fit.amplitude);
         let k = fit.priors.len();
-        let qz = cov.spectrum.project_cross(&cov.lr, cmat);
         // s² Cy V⁻¹ Cyᵀ, without Woodbury's cancellation (see above)
-        let mut explained = cov.spectrum.explained(&qz, cov.t()) * s;
+        let mut explained = cov.spectrum.explained(&cov.lr, &cross.coords, cov.t()) * s;
         if let Some((per_coef, m_inv)) = &self.tolerance_terms {
             // Woodbury: Cy V'⁻¹ Cyᵀ = Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = Cy V⁻¹ J (per unit s)
-            let d = cy_vinv_j(per_coef, cmat);
+            let d = cy_vinv_j(per_coef, &cross.cmat);
             explained -= &d * m_inv * d.transpose() * (s * s);
         }
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
