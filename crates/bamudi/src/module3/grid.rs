@@ -21,6 +21,18 @@ pub trait LogPosteriors: Sync {
     /// once per node (stage Module 3). The default evaluates the nodes one by one in
     /// parallel; an evaluator whose nodes share a costly factor (the dense covariance of
     /// Eq. 51) overrides it to batch the work on that factor.
+    ///
+    /// ```
+    /// use bamudi::module3::grid::LogPosteriors;
+    /// struct Normal; // a N(0, 1) posterior with and without discrepancy
+    /// impl LogPosteriors for Normal {
+    ///     fn log_posteriors(&self, t: &[f64]) -> bamudi::Result<(f64, f64)> {
+    ///         Ok((-0.5 * t[0] * t[0], -0.5 * t[0] * t[0]))
+    ///     }
+    /// }
+    /// let v = Normal.log_posteriors_at_nodes(&[0.0, 2.0], &bamudi::observe::Silent).unwrap();
+    /// assert_eq!(v, vec![(0.0, 0.0), (-2.0, -2.0)]);
+    /// ```
     fn log_posteriors_at_nodes(
         &self,
         nodes: &[f64],

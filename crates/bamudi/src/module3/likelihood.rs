@@ -134,6 +134,17 @@ impl FactoredCovariance {
     /// ([`numerics::Cholesky::quad_forms`]): the per-`θ` cost of the grid falls from a
     /// memory-bound sweep over the whole factor to a share of one cache-blocked solve. Equal to
     /// the one-by-one values up to round-off.
+    ///
+    /// ```
+    /// use bamudi::module3::likelihood::FactoredCovariance;
+    /// use nalgebra::DMatrix;
+    /// let v = DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0]);
+    /// let f = FactoredCovariance::new(&v, "V").unwrap();
+    /// let r = DMatrix::from_column_slice(2, 2, &[2.0, 0.0, 0.5, -1.0]);
+    /// let both = f.log_densities(&r).unwrap();
+    /// assert!((both[0] - f.log_density(&[2.0, 0.0]).unwrap()).abs() < 1e-12);
+    /// assert!((both[1] - f.log_density(&[0.5, -1.0]).unwrap()).abs() < 1e-12);
+    /// ```
     pub fn log_densities(&self, resids: &DMatrix<f64>) -> Result<Vec<f64>> {
         let n = self.size();
         if resids.nrows() != n {

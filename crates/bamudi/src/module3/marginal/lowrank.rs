@@ -94,6 +94,25 @@ impl LowRank {
     /// its cross covariance with an input: the correlation part `corr` (`N_e`) projected
     /// orthogonally onto the kept eigenvectors (the columns of `U_k Λ_k^{1/2}` are orthogonal:
     /// `f_jᵀ corr / |f_j|²`), and `level` (`ax √c`) on the level's column when there is one.
+    ///
+    /// ```
+    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank};
+    /// use nalgebra::{DMatrix, DVector};
+    /// let x = DMatrix::from_fn(6, 1, |i, _| i as f64);
+    /// let prior = CoefficientPrior {
+    ///     kernel: gp::Kernel::Matern52 { ard: false },
+    ///     length_scales: vec![1.0],
+    ///     level_variance: 4.0,
+    /// };
+    /// let amps = DMatrix::from_element(6, 1, 1.0);
+    /// let lr = LowRank::new(&[prior], &x, &amps, &DMatrix::from_element(1, 1, 1.0)).unwrap();
+    /// let corr = DVector::from_fn(6, |i, _| (-(i as f64) / 2.0).exp());
+    /// let g = lr.factor_coordinates(0, &corr, Some(2.0));
+    /// let (f, _) = lr.factor(0);
+    /// // every eigen-pair of this 6 x 6 matrix is kept: F g is corr plus the level part 2 √4
+    /// let back = f * &g;
+    /// assert!((0..6).all(|i| (back[i] - corr[i] - 4.0).abs() < 1e-9));
+    /// ```
     pub fn factor_coordinates(
         &self,
         k: usize,
@@ -413,6 +432,28 @@ impl Spectrum {
     /// the dual one (over `λ_j > NULL_DIRECTION · λ_max`; `W G` has no part outside them).
     /// Every term is non-negative and at most `y_j²`: unlike Woodbury's
     /// `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z) / σ²`, nothing large is subtracted.
+    ///
+    /// ```
+    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+    /// use nalgebra::DMatrix;
+    /// let x = DMatrix::from_fn(5, 1, |i, _| i as f64);
+    /// let prior = CoefficientPrior {
+    ///     kernel: gp::Kernel::Matern52 { ard: false },
+    ///     length_scales: vec![1.0],
+    ///     level_variance: 0.0,
+    /// };
+    /// let amps = DMatrix::from_element(5, 1, 1.0);
+    /// let lr = LowRank::new(&[prior], &x, &amps, &DMatrix::from_element(1, 1, 1.0)).unwrap();
+    /// let g = DMatrix::from_fn(lr.rank(), 1, |i, _| 1.0 / (1.0 + i as f64));
+    /// let t = 3.0;
+    /// // against t Gᵀ M (I + tM)⁻¹ G with M = WᵀW, solved densely
+    /// let w = lr.w(&DMatrix::identity(lr.rank(), lr.rank()));
+    /// let m = w.tr_mul(&w);
+    /// let id = DMatrix::identity(lr.rank(), lr.rank());
+    /// let dense = g.tr_mul(&(&m * t + id).lu().solve(&(&m * &g)).unwrap()) * t;
+    /// let ours = Spectrum::new(&lr).unwrap().explained(&lr, &g, t);
+    /// assert!((ours - dense).amax() < 1e-9);
+    /// ```
     pub fn explained(&self, lr: &LowRank, g: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
         let (y, weight) = match &self.basis {
             Basis::Primal { qt, .. } => (qt * g, self.lambda.map(|l| t * l / (1.0 + t * l))),

@@ -1137,12 +1137,46 @@ mod tests {
         }
     }
 
+    /// A fit with the test's priors, coefficient scales at the experiments, amplitude `s` and
+    /// declared tolerances' columns (no θ nodes: the covariance tests need none).
+    fn test_fit(
+        priors: Vec<CoefficientPrior>,
+        amplitudes: DMatrix<f64>,
+        s: f64,
+        tolerance_columns: Option<DMatrix<f64>>,
+    ) -> MarginalFit {
+        MarginalFit {
+            priors,
+            amplitude: s,
+            length_scale_factor: 1.0,
+            rho_prior: (0.0, 1.0),
+            rho_mean: 0.5,
+            rho_sd: 0.1,
+            rank: 0,
+            amplitudes,
+            support: None,
+            support_theta: vec![0.0],
+            nodes: Vec::new(),
+            tolerances: Vec::new(),
+            tolerance_columns,
+        }
+    }
+
+    /// The coefficients' prior covariance at `xs` (diagonal: independent coefficients, every
+    /// one with `prior`, scales `ax`, amplitude `s`).
+    fn prior_cov_at(prior: &CoefficientPrior, xs: &[f64], ax: &[f64], s: f64) -> DMatrix<f64> {
+        DMatrix::from_fn(ax.len(), ax.len(), |a, c| match a == c {
+            true => s * ax[a] * ax[a] * prior.cov(xs, xs),
+            false => 0.0,
+        })
+    }
+
     /// Module 4's coefficient covariance stays a covariance when the data are informative:
     /// gate-like magnitudes (coefficient scales 6e3 lbf/in, level variance 1e3, `b` entries
     /// about 0.03 µε per lbf/in, 1 µε noise, 60 experiments: `t λ_max` about 1e10). Asserted:
     /// the posterior is positive semi-definite and below the prior (the data never add
-    /// variance), both to 1e-9 of the prior's size (rounding of a subtraction at that
-    /// scale). Woodbury's form `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z)/σ²`, which `coefficient_cov` used
+    /// variance), both to 1e-9 of the prior's size (an empirical bound, not an error analysis:
+    /// the new form subtracts nothing larger than the prior). Woodbury's form `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z)/σ²`, which `coefficient_cov` used
     /// before, is computed beside it to show the check has power here: its smallest
     /// eigenvalue is −1.4e-5 of the prior's size (measured when written; the FE-gate record
     /// that stopped `bamudi close-loop` reached −1.2 of the largest).
@@ -1165,21 +1199,7 @@ mod tests {
         };
         let amps = DMatrix::from_fn(n_e, 3, |i, k| 6e3 * (1.0 + 0.01 * (i + k) as f64));
         let (s, sigma2) = (1.0, 1.0);
-        let fit = MarginalFit {
-            priors: vec![prior.clone(); 3],
-            amplitude: s,
-            length_scale_factor: 1.0,
-            rho_prior: (0.0, 1.0),
-            rho_mean: 0.5,
-            rho_sd: 0.1,
-            rank: 0,
-            amplitudes: amps,
-            support: None,
-            support_theta: vec![0.0],
-            nodes: Vec::new(),
-            tolerances: Vec::new(),
-            tolerance_columns: None,
-        };
+        let fit = test_fit(vec![prior.clone(); 3], amps, s, None);
         let state = MarginalState::new(&fit, &x, &parts, sigma2).unwrap();
         let mut woodbury_worst = 0.0f64;
         for xs in [0.05, 2.33, 5.9, 7.5] {
@@ -1187,10 +1207,7 @@ mod tests {
             let cross = state.cross_cov(&fit, &[xs], &ax, &x);
             let post = state.coefficient_cov(&fit, &[xs], &ax, &cross);
             let cmat = fit.cross_cov(&[xs], &ax, &x);
-            let prior_cov = DMatrix::from_fn(3, 3, |a, c| match a == c {
-                true => s * ax[a] * ax[a] * prior.cov(&[xs], &[xs]),
-                false => 0.0,
-            });
+            let prior_cov = prior_cov_at(&prior, &[xs], &ax, s);
             let scale = prior_cov.amax();
             let min_eig =
                 |m: &DMatrix<f64>| numerics::SymmetricEigen::new(m, "m").unwrap().values[0];
@@ -1210,7 +1227,6 @@ mod tests {
             let woodbury = &prior_cov - q * (s * s);
             woodbury_worst = woodbury_worst.min(min_eig(&woodbury) / scale);
         }
-        eprintln!("former Woodbury form: smallest eigenvalue / prior scale {woodbury_worst:e}");
         assert!(
             woodbury_worst < -1e-6,
             "the former form held here too: {woodbury_worst:e}"
@@ -1239,21 +1255,7 @@ mod tests {
         let amps = DMatrix::from_fn(n_e, 2, |i, k| 1.0 + 0.1 * (i + k) as f64);
         let (s, sigma2, n_s) = (1.3, 0.2, 3 * n_e);
         let j = DMatrix::from_fn(n_s, 2, |r, c| ((r * (c + 2)) % 5) as f64 * 0.4 - 0.6);
-        let fit = MarginalFit {
-            priors: vec![prior.clone(), prior.clone()],
-            amplitude: s,
-            length_scale_factor: 1.0,
-            rho_prior: (0.0, 1.0),
-            rho_mean: 0.5,
-            rho_sd: 0.1,
-            rank: 0,
-            amplitudes: amps.clone(),
-            support: None,
-            support_theta: vec![0.0],
-            nodes: Vec::new(),
-            tolerances: Vec::new(),
-            tolerance_columns: Some(j.clone()),
-        };
+        let fit = test_fit(vec![prior.clone(); 2], amps.clone(), s, Some(j.clone()));
         let state = MarginalState::new(&fit, &x, &parts, sigma2).unwrap();
         let (xs, ax) = ([1.7], [1.1, 0.9]);
         let cmat = fit.cross_cov(&xs, &ax, &x);
@@ -1274,10 +1276,7 @@ mod tests {
         }
         let cy = DMatrix::from_fn(2, n_s, |c, r| s * cmat[(r / 3, c)] * b[(r % 3, c)]);
         let inv = Cholesky::new(&v, "V'").unwrap();
-        let prior_cov = DMatrix::from_fn(2, 2, |a, c| match a == c {
-            true => s * ax[a] * ax[a] * prior.cov(&xs, &xs),
-            false => 0.0,
-        });
+        let prior_cov = prior_cov_at(&prior, &xs, &ax, s);
         let dense = prior_cov - &cy * inv.solve(&cy.transpose()).unwrap();
         // a 24 x 24 solve with condition number about 1e3: rounding far below 1e-8 of the prior
         assert!(
