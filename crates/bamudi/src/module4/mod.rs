@@ -30,7 +30,7 @@ pub use draws::{DrawPaths, ResponseDraw, empirical_band};
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
 use crate::module3::marginal::nuisance::{ToleranceColumns, columns_at};
-use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState};
+use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState, NodeTerms};
 use crate::module3::posterior::SupportPolicy;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
@@ -63,6 +63,10 @@ struct MarginalView<'a> {
     fit: &'a MarginalFit,
     state: std::sync::Arc<MarginalState>,
     nodes: Vec<MarginalNode>,
+    /// The nodes' projected residual columns ([`MarginalState::node_terms`]).
+    terms: NodeTerms,
+    /// `ρ`'s conditional mean at each node.
+    rhos: Vec<f64>,
 }
 
 /// The coefficients' posterior at one input, per support point: mean and its derivative in
@@ -132,7 +136,15 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 let nodes = fit.grouped_nodes(policy.max_nodes);
                 self.support = nodes.iter().map(|n| (n.theta.clone(), n.weight)).collect();
                 let state = self.cal.marginal_state()?;
-                self.marginal = Some(MarginalView { fit, state, nodes });
+                let terms = state.node_terms(&nodes)?;
+                let rhos = nodes.iter().map(|n| n.rho_mean).collect();
+                self.marginal = Some(MarginalView {
+                    fit,
+                    state,
+                    nodes,
+                    terms,
+                    rhos,
+                });
             }
         }
         Ok(())
@@ -346,16 +358,14 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         let cross = view
             .state
             .cross_cov(view.fit, x, &ax, self.cal.x_experiments());
-        let cmat = &cross.cmat;
-        let (mut mean, mut slope, mut rho) = (vec![], vec![], vec![]);
-        for node in &view.nodes {
-            let (m, s) = view.fit.coefficient_mean(node, cmat, node.rho_mean);
-            mean.push(m);
-            slope.push(s);
-            rho.push((node.rho_mean, node.rho_var));
-        }
+        let (mean, slope) = view
+            .state
+            .coefficient_means(&cross, &view.terms, &view.rhos)
+            .into_iter()
+            .unzip();
+        let rho = view.nodes.iter().map(|n| (n.rho_mean, n.rho_var)).collect();
         let cov = view.state.coefficient_cov(view.fit, x, &ax, &cross);
-        let tolerance = match view.state.tolerance_cross(view.fit, cmat) {
+        let tolerance = match view.state.tolerance_cross(&cross) {
             None => None,
             Some((cross, m_inv)) => Some(ToleranceAt {
                 mean: tolerance_means(view.fit, m_inv.nrows())?,

@@ -339,6 +339,11 @@ enum Basis {
 }
 
 impl Spectrum {
+    /// The largest eigenvalue `λ_max` of `WᵀW` (0 without columns).
+    pub fn lambda_max(&self) -> f64 {
+        self.lambda.iter().copied().fold(0.0f64, f64::max)
+    }
+
     /// Decomposes the smaller of `WᵀW` and `W Wᵀ` of `lr`.
     pub fn new(lr: &LowRank) -> Result<Self> {
         if lr.rank() > lr.n_obs() {
@@ -426,8 +431,32 @@ impl Spectrum {
         qa.tr_mul(&self.shrink(qb, t))
     }
 
+    /// The coordinates `y` of cross covariances `Cᵀ = W G` in the eigenbasis and the weights
+    /// `w` with `s Gᵀ Wᵀ V⁻¹ v = yᵀ diag(w) (Qᵀ Wᵀ v)` for every `v` projected by
+    /// [`project`](Self::project). Primal: `y = QᵀG`, `w = t/(1 + tλ)` (from
+    /// `Wᵀ V⁻¹ = Q diag(1/(σ²(1 + tλ))) Qᵀ Wᵀ`). Dual: `y = Λ^{1/2} Pᵀ W G`,
+    /// `w = t/(λ(1 + tλ))` over `λ_j > NULL_DIRECTION · λ_max` (`W G` lies in their span).
+    fn cross_coordinates(
+        &self,
+        lr: &LowRank,
+        g: &DMatrix<f64>,
+        t: f64,
+    ) -> (DMatrix<f64>, DVector<f64>) {
+        match &self.basis {
+            Basis::Primal { qt, .. } => (qt * g, self.lambda.map(|l| t / (1.0 + t * l))),
+            Basis::Dual { wqt, .. } => {
+                let cut = NULL_DIRECTION * self.lambda_max();
+                let weight = self.lambda.map(|l| match l > cut {
+                    true => t / (l * (1.0 + t * l)),
+                    false => 0.0,
+                });
+                (wqt * lr.w(g), weight)
+            }
+        }
+    }
+
     /// `s C V⁻¹ Cᵀ` for cross covariances `Cᵀ = W G` given by their coordinates `G`
-    /// (`R x K`, [`LowRank::factor_coordinates`]): `yᵀ diag(tλ/(1 + tλ)) y` with `y = QᵀG`
+    /// (`R x K`, [`LowRank::factor_coordinates`]): `yᵀ diag(tλ/(1+tλ)) y` with `y = QᵀG`
     /// in the primal form, `Σ_j t z_j z_jᵀ / (λ_j (1 + tλ_j))` with `z = Λ^{1/2} Pᵀ W G` in
     /// the dual one (over `λ_j > NULL_DIRECTION · λ_max`; `W G` has no part outside them).
     /// Every term is non-negative and at most `y_j²`: unlike Woodbury's
@@ -455,18 +484,59 @@ impl Spectrum {
     /// assert!((ours - dense).amax() < 1e-9);
     /// ```
     pub fn explained(&self, lr: &LowRank, g: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
-        let (y, weight) = match &self.basis {
-            Basis::Primal { qt, .. } => (qt * g, self.lambda.map(|l| t * l / (1.0 + t * l))),
-            Basis::Dual { wqt, .. } => {
-                let cut = NULL_DIRECTION * self.lambda.iter().copied().fold(0.0f64, f64::max);
-                let weight = self.lambda.map(|l| match l > cut {
-                    true => t / (l * (1.0 + t * l)),
-                    false => 0.0,
-                });
-                (wqt * lr.w(g), weight)
+        let (y, weight) = self.cross_coordinates(lr, g, t);
+        // Qᵀ Wᵀ (W G): Λ y in the primal form, y itself in the dual one
+        let scaled = match &self.basis {
+            Basis::Primal { .. } => DMatrix::from_fn(y.nrows(), y.ncols(), |j, c| {
+                y[(j, c)] * weight[j] * self.lambda[j]
+            }),
+            Basis::Dual { .. } => {
+                DMatrix::from_fn(y.nrows(), y.ncols(), |j, c| y[(j, c)] * weight[j])
             }
         };
-        let scaled = DMatrix::from_fn(y.nrows(), y.ncols(), |j, c| y[(j, c)] * weight[j]);
+        y.tr_mul(&scaled)
+    }
+
+    /// `s C V⁻¹ v` for cross covariances `Cᵀ = W G` (coordinates `G`, `R x K`) and
+    /// observations given by their projections `qv = Qᵀ Wᵀ v` ([`project`](Self::project)):
+    /// `yᵀ diag(w) qv` (`K x c`, [`cross_coordinates`](Self::cross_coordinates)). The
+    /// coefficients' posterior mean is this with `v` the residual of the model. Unlike
+    /// `s C (V⁻¹ v)` with Woodbury's `V⁻¹ v = (v − t W Q (I + tΛ)⁻¹ Qᵀ Wᵀ v)/σ²`, whose
+    /// components along the well-seen directions are small differences of large terms, no
+    /// term is a difference, so the mean keeps its accuracy when `t λ_max` is large and `C`
+    /// lies along those very directions.
+    ///
+    /// ```
+    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+    /// use nalgebra::DMatrix;
+    /// let x = DMatrix::from_fn(5, 1, |i, _| i as f64);
+    /// let prior = CoefficientPrior {
+    ///     kernel: gp::Kernel::Matern52 { ard: false },
+    ///     length_scales: vec![1.0],
+    ///     level_variance: 0.0,
+    /// };
+    /// let amps = DMatrix::from_element(5, 1, 1.0);
+    /// let lr = LowRank::new(&[prior], &x, &amps, &DMatrix::from_element(1, 1, 1.0)).unwrap();
+    /// let g = DMatrix::from_fn(lr.rank(), 1, |i, _| 1.0 / (1.0 + i as f64));
+    /// let v = DMatrix::from_fn(5, 1, |i, _| (i as f64).cos());
+    /// let (s, sigma2) = (3.0, 0.5);
+    /// // against s (W G)ᵀ (s W Wᵀ + σ² I)⁻¹ v, solved densely
+    /// let w = lr.w(&DMatrix::identity(lr.rank(), lr.rank()));
+    /// let vm = &w * w.transpose() * s + DMatrix::identity(5, 5) * sigma2;
+    /// let dense = (&w * &g).tr_mul(&vm.lu().solve(&v).unwrap()) * s;
+    /// let spectrum = Spectrum::new(&lr).unwrap();
+    /// let ours = spectrum.explained_cross(&lr, &g, &spectrum.project(&lr, &v), s / sigma2);
+    /// assert!((ours - dense).amax() < 1e-9);
+    /// ```
+    pub fn explained_cross(
+        &self,
+        lr: &LowRank,
+        g: &DMatrix<f64>,
+        qv: &DMatrix<f64>,
+        t: f64,
+    ) -> DMatrix<f64> {
+        let (y, weight) = self.cross_coordinates(lr, g, t);
+        let scaled = DMatrix::from_fn(qv.nrows(), qv.ncols(), |j, c| qv[(j, c)] * weight[j]);
         y.tr_mul(&scaled)
     }
 

@@ -1,7 +1,7 @@
 //! What Module 4 needs of the marginal mode: the coefficients' posterior at new inputs.
 
-use super::{Covariance, LowRank, MarginalFit, MarginalNode, per_coefficient, supported_basis};
-use crate::error::Result;
+use super::{Covariance, LowRank, MarginalFit, MarginalNode, supported_basis};
+use crate::error::{BamudiError, Result};
 use crate::module2::training::LinearParts;
 use nalgebra::{DMatrix, DVector};
 
@@ -12,9 +12,29 @@ pub struct MarginalState {
     cov: Covariance,
     l: DMatrix<f64>,
     b: DMatrix<f64>,
-    /// With declared tolerances: `(I ⊗ b_kᵀ) V⁻¹ J_p` per tolerance (`N_e x K` each) and
-    /// `M⁻¹ = (I + Jᵀ V⁻¹ J)⁻¹`, the Woodbury terms of `V' = V + J Jᵀ`.
-    tolerance_terms: Option<(Vec<DMatrix<f64>>, DMatrix<f64>)>,
+    /// The Woodbury terms of `V' = V + J Jᵀ` with declared tolerances.
+    tolerance_terms: Option<ToleranceTerms>,
+}
+
+/// The declared tolerances' columns `J` as the coefficients' posterior needs them.
+#[derive(Debug, Clone)]
+struct ToleranceTerms {
+    /// `Qᵀ Wᵀ J` ([`Spectrum::project`](super::Spectrum::project)), for `s Cy V⁻¹ J`.
+    projected: DMatrix<f64>,
+    /// `V⁻¹ J` (`N_s x P`).
+    vj: DMatrix<f64>,
+    /// `M⁻¹ = (I + Jᵀ V⁻¹ J)⁻¹` (`P x P`).
+    m_inv: DMatrix<f64>,
+}
+
+/// The `θ` nodes' data in the form the coefficients' posterior mean at new inputs needs
+/// ([`MarginalState::node_terms`]), every node's two columns side by side.
+#[derive(Debug, Clone)]
+pub struct NodeTerms {
+    /// `Qᵀ Wᵀ [c_j a_j]` for every node `j` (`2 n` columns).
+    projected: DMatrix<f64>,
+    /// With declared tolerances: `M⁻¹ Jᵀ V⁻¹ [c_j a_j]` (`P x 2 n`).
+    tolerance: Option<DMatrix<f64>>,
 }
 
 /// The prior covariances between the coefficients at one input and at the experiments
@@ -48,15 +68,13 @@ impl MarginalState {
         }
         let cov = Covariance::new(lr, fit.amplitude, sigma2)?
             .with_tolerances(fit.tolerance_columns.clone());
-        let tolerance_terms = match cov.tolerance_solve()? {
-            None => None,
-            Some((vj, m)) => {
-                let p = vj.ncols();
-                let per_coef = (0..p)
-                    .map(|c| per_coefficient(&vj, c, b.nrows(), &b))
-                    .collect();
-                Some((per_coef, m.solve(&DMatrix::identity(p, p))?))
-            }
+        let tolerance_terms = match (cov.tolerance_solve()?, cov.tolerance_columns()) {
+            (Some((vj, m)), Some(j)) => Some(ToleranceTerms {
+                projected: cov.spectrum.project(&cov.lr, j),
+                m_inv: m.solve(&DMatrix::identity(j.ncols(), j.ncols()))?,
+                vj,
+            }),
+            _ => None,
         };
         Ok(Self {
             cov,
@@ -143,10 +161,10 @@ impl MarginalState {
         let k = fit.priors.len();
         // s² Cy V⁻¹ Cyᵀ, without Woodbury's cancellation (see above)
         let mut explained = cov.spectrum.explained(&cov.lr, &cross.coords, cov.t()) * s;
-        if let Some((per_coef, m_inv)) = &self.tolerance_terms {
-            // Woodbury: Cy V'⁻¹ Cyᵀ = Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = Cy V⁻¹ J (per unit s)
-            let d = cy_vinv_j(per_coef, &cross.cmat);
-            explained -= &d * m_inv * d.transpose() * (s * s);
+        if let Some(tol) = &self.tolerance_terms {
+            // Woodbury: s² Cy V'⁻¹ Cyᵀ = s² Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = s Cy V⁻¹ J
+            let d = self.cy_vinv_j(tol, cross);
+            explained -= &d * &tol.m_inv * d.transpose();
         }
         let prior = DMatrix::from_fn(k, k, |i, j| match i == j {
             true => ax[i] * ax[i] * fit.priors[i].cov(x, x),
@@ -156,26 +174,89 @@ impl MarginalState {
     }
 
     /// With declared tolerances, their deviations' joint posterior with the coefficients at
-    /// `x` (from `cmat` of [`MarginalFit::cross_cov`]): `Cov(α(x), η | y) = −s Cy V'⁻¹ J =
-    /// −s (Cy V⁻¹ J) M⁻¹` (`K x P`; the prior has no covariance between the two) and
+    /// `x` (`cross` from [`cross_cov`](Self::cross_cov)): `Cov(α(x), η | y) = −s Cy V'⁻¹ J =
+    /// −(s Cy V⁻¹ J) M⁻¹` (`K x P`; the prior has no covariance between the two) and
     /// `Var(η | y) = M⁻¹` (`P x P`). `None` when none were declared.
-    pub fn tolerance_cross(
-        &self,
-        fit: &MarginalFit,
-        cmat: &DMatrix<f64>,
-    ) -> Option<(DMatrix<f64>, &DMatrix<f64>)> {
-        let (per_coef, m_inv) = self.tolerance_terms.as_ref()?;
-        let d = cy_vinv_j(per_coef, cmat);
-        Some(((d * m_inv) * (-fit.amplitude), m_inv))
+    pub fn tolerance_cross(&self, cross: &CrossCov) -> Option<(DMatrix<f64>, &DMatrix<f64>)> {
+        let tol = self.tolerance_terms.as_ref()?;
+        let d = self.cy_vinv_j(tol, cross);
+        Some((-(d * &tol.m_inv), &tol.m_inv))
     }
-}
 
-/// `Cy V⁻¹ J` per unit amplitude (`K x P`): coefficient `c` against tolerance `p` is
-/// `Σ_i C_c(x, x_i) [(I ⊗ b_cᵀ) V⁻¹ J_p]_i`.
-fn cy_vinv_j(per_coef: &[DMatrix<f64>], cmat: &DMatrix<f64>) -> DMatrix<f64> {
-    DMatrix::from_fn(cmat.ncols(), per_coef.len(), |c, p| {
-        cmat.column(c).dot(&per_coef[p].column(c))
-    })
+    /// `s Cy V⁻¹ J` (`K x P`) in the eigenbasis ([`Spectrum::explained_cross`]).
+    ///
+    /// [`Spectrum::explained_cross`]: super::Spectrum::explained_cross
+    fn cy_vinv_j(&self, tol: &ToleranceTerms, cross: &CrossCov) -> DMatrix<f64> {
+        let cov = &self.cov;
+        cov.spectrum
+            .explained_cross(&cov.lr, &cross.coords, &tol.projected, cov.t())
+    }
+
+    /// The nodes' residual columns `c = y − b(θ)` and `a = A g(θ)` projected on the
+    /// eigenbasis, and with declared tolerances `M⁻¹ Jᵀ V⁻¹ [c a]`: computed once, used at
+    /// every input by [`coefficient_means`](Self::coefficient_means). An error when a node's
+    /// columns do not have one entry per observation (an edited calibration file).
+    pub fn node_terms(&self, nodes: &[MarginalNode]) -> Result<NodeTerms> {
+        let n_s = self.cov.lr.n_obs();
+        let mut cols = Vec::with_capacity(2 * nodes.len());
+        for (j, node) in nodes.iter().enumerate() {
+            for (what, v) in [("c", &node.c), ("a", &node.a)] {
+                if v.len() != n_s {
+                    return Err(BamudiError::dim(
+                        format!("column `{what}` of marginal node {j} vs the observations"),
+                        n_s,
+                        v.len(),
+                    ));
+                }
+                cols.push(v.clone());
+            }
+        }
+        let ca = match cols.is_empty() {
+            true => DMatrix::zeros(n_s, 0),
+            false => DMatrix::from_columns(&cols),
+        };
+        let tolerance = self
+            .tolerance_terms
+            .as_ref()
+            .map(|tol| &tol.m_inv * tol.vj.tr_mul(&ca));
+        Ok(NodeTerms {
+            projected: self.cov.spectrum.project(&self.cov.lr, &ca),
+            tolerance,
+        })
+    }
+
+    /// The coefficients' posterior mean at `x` given each node `j` and its `ρ_j`, and its
+    /// derivative in `ρ` (`K` each): `s Cy V'⁻¹ (c_j − ρ_j a_j)` from [`NodeTerms`] and
+    /// `cross` ([`cross_cov`](Self::cross_cov)), in the eigenbasis
+    /// ([`Spectrum::explained_cross`], one product for all nodes). With informative data the
+    /// coefficients' means can be large and cancel in `B α` (more coefficients than gauges),
+    /// so `V⁻¹ (c − ρ a)` by Woodbury's subtraction, used before, was not accurate enough (on
+    /// an hourly FE-gate record with thermal strain, `t λ_max` 5e13, it put predictions
+    /// 3e4 µε off data of 1e2 µε).
+    ///
+    /// [`Spectrum::explained_cross`]: super::Spectrum::explained_cross
+    pub fn coefficient_means(
+        &self,
+        cross: &CrossCov,
+        terms: &NodeTerms,
+        rhos: &[f64],
+    ) -> Vec<(DVector<f64>, DVector<f64>)> {
+        let cov = &self.cov;
+        let mut e = cov
+            .spectrum
+            .explained_cross(&cov.lr, &cross.coords, &terms.projected, cov.t());
+        if let (Some(tol), Some(jr)) = (&self.tolerance_terms, &terms.tolerance) {
+            // s Cy V'⁻¹ v = s Cy V⁻¹ v − (s Cy V⁻¹ J) M⁻¹ Jᵀ V⁻¹ v
+            e -= self.cy_vinv_j(tol, cross) * jr;
+        }
+        rhos.iter()
+            .enumerate()
+            .map(|(j, rho)| {
+                let (c, a) = (e.column(2 * j), e.column(2 * j + 1));
+                (c - a * *rho, -a)
+            })
+            .collect()
+    }
 }
 
 impl MarginalFit {
@@ -186,25 +267,6 @@ impl MarginalFit {
             let xi: Vec<f64> = experiments.row(i).iter().copied().collect();
             ax[k] * self.amplitudes[(i, k)] * self.priors[k].cov(x, &xi)
         })
-    }
-
-    /// The coefficients' posterior mean at `x` given node `node` and `ρ`, and its derivative
-    /// in `ρ` (`K` each), from the cross covariances `cmat` ([`cross_cov`](Self::cross_cov)).
-    pub fn coefficient_mean(
-        &self,
-        node: &MarginalNode,
-        cmat: &DMatrix<f64>,
-        rho: f64,
-    ) -> (DVector<f64>, DVector<f64>) {
-        let s = self.amplitude;
-        let k = self.priors.len();
-        let mean = DVector::from_fn(k, |c, _| {
-            s * cmat
-                .column(c)
-                .dot(&(node.u0.column(c) - node.u1.column(c) * rho))
-        });
-        let slope = DVector::from_fn(k, |c, _| -s * cmat.column(c).dot(&node.u1.column(c)));
-        (mean, slope)
     }
 
     /// The nodes grouped into at most `max` equal-mass groups of neighbouring `θ` (scalar `θ`;
@@ -235,11 +297,10 @@ fn merge_nodes(nodes: &[&MarginalNode]) -> MarginalNode {
     let w: f64 = nodes.iter().map(|n| n.weight).sum();
     let avg =
         |f: &dyn Fn(&MarginalNode) -> f64| nodes.iter().map(|n| n.weight * f(n)).sum::<f64>() / w;
-    let avg_m = |f: &dyn Fn(&MarginalNode) -> &DMatrix<f64>| {
-        let first = f(nodes[0]);
+    let avg_v = |f: &dyn Fn(&MarginalNode) -> &DVector<f64>| {
         nodes
             .iter()
-            .fold(DMatrix::zeros(first.nrows(), first.ncols()), |acc, n| {
+            .fold(DVector::zeros(f(nodes[0]).len()), |acc, n| {
                 acc + f(n) * (n.weight / w)
             })
     };
@@ -250,7 +311,7 @@ fn merge_nodes(nodes: &[&MarginalNode]) -> MarginalNode {
         weight: w,
         rho_mean,
         rho_var: (second - rho_mean * rho_mean).max(0.0),
-        u0: avg_m(&|n| &n.u0),
-        u1: avg_m(&|n| &n.u1),
+        c: avg_v(&|n| &n.c),
+        a: avg_v(&|n| &n.a),
     }
 }
