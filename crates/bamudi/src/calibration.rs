@@ -520,6 +520,27 @@ impl Calibration {
         if d != self.signature.input_names.len() || self.alpha_hat().nrows() != n_e {
             return Err("experiment inputs and coefficient estimates disagree in size".into());
         }
+        self.validate_marginal_nodes(n_e * self.parts.b.nrows())
+    }
+
+    /// Every marginal node's columns `c` and `a` have one entry per observation (`n_s`);
+    /// a calibration saved before the nodes kept them has none.
+    fn validate_marginal_nodes(&self, n_s: usize) -> std::result::Result<(), String> {
+        let Some(fit) = &self.module3.marginal else {
+            return Ok(());
+        };
+        for (j, node) in fit.nodes.iter().enumerate() {
+            for (what, v) in [("c", &node.c), ("a", &node.a)] {
+                if v.len() != n_s {
+                    return Err(format!(
+                        "module3.marginal.nodes[{j}].{what} has {} entries, expected {n_s} (one \
+                         per observation; a calibration saved by an older bamudi lacks them: \
+                         calibrate again)",
+                        v.len()
+                    ));
+                }
+            }
+        }
         Ok(())
     }
 }

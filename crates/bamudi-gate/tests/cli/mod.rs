@@ -372,6 +372,41 @@ fn simulate_calibrate_predict_round_trip_on_a_coarse_gate() {
         !fatigue.exists(),
         "a failed run must not leave a fatigue table"
     );
+    a_calibration_without_node_columns_is_a_clear_error(&d, &out.join("calibration.json"));
+}
+
+/// A calibration file in the format before the marginal nodes kept their columns `c` and `a`
+/// (here: this run's file with them removed) is refused with the key and the remedy, not
+/// with a panic or a prediction from empty columns.
+fn a_calibration_without_node_columns_is_a_clear_error(d: &Path, saved: &Path) {
+    let text = std::fs::read_to_string(saved).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let nodes = json["module3"]["marginal"]["nodes"]
+        .as_array_mut()
+        .expect("the default calibration is the marginal mode's, with nodes");
+    for node in nodes {
+        let node = node.as_object_mut().unwrap();
+        node.remove("c");
+        node.remove("a");
+    }
+    let old = d.join("old_format.json");
+    std::fs::write(&old, json.to_string()).unwrap();
+    fails_naming(
+        &[
+            "predict",
+            "--calibration",
+            s(&old),
+            "--h-up",
+            "600",
+            "--h-down",
+            "100",
+        ],
+        &[
+            "old_format.json",
+            "module3.marginal.nodes[0].c",
+            "calibrate again",
+        ],
+    );
 }
 
 #[test]

@@ -234,10 +234,13 @@ pub struct MarginalNode {
     pub rho_var: f64,
     /// `c = y − b(θ)` (`N_s`, experiment-major): with `a`, the coefficients' posterior mean
     /// at any input is `s Cy V⁻¹ (c − ρ a)` ([`MarginalState::coefficient_means`]). The
-    /// columns themselves are stored rather than `V⁻¹`-weighted forms, which are neither
-    /// accurate (Woodbury) nor independent of the eigen-solver's signs.
+    /// columns themselves are stored, free of any basis; `V⁻¹ c` by Woodbury's subtraction,
+    /// stored before, was not accurate enough. Missing in files of older versions (then
+    /// empty, and loading says so).
+    #[serde(default)]
     pub c: DVector<f64>,
     /// `a = A g(θ)` (`N_s`).
+    #[serde(default)]
     pub a: DVector<f64>,
 }
 
@@ -1063,6 +1066,12 @@ mod tests {
         let dense = g.tr_mul(&solved) * t;
         close(&dual.explained(&lr, &g, t), &dense, "explained (dual)");
         close(&primal.explained(&lr, &g, t), &dense, "explained (primal)");
+        // and the coefficients' mean `s (W G)ᵀ V⁻¹ v` (`s = t σ²`), densely
+        let vm = &w * w.transpose() * (t * sigma2) + DMatrix::identity(24, 24) * sigma2;
+        let dense = (&w * &g).tr_mul(&vm.lu().solve(&v).unwrap()) * (t * sigma2);
+        let mean = |s: &Spectrum| s.explained_cross(&lr, &g, &s.project(&lr, &v), t);
+        close(&mean(&dual), &dense, "explained_cross (dual)");
+        close(&mean(&primal), &dense, "explained_cross (primal)");
     }
 
     /// With declared tolerances `V' = V + J Jᵀ`: the Woodbury forms (solves, the Gram matrix
@@ -1228,13 +1237,25 @@ mod tests {
         );
     }
 
-    /// Module 4's coefficient covariance with declared tolerances,
-    /// `s P − s² Cy V'⁻¹ Cyᵀ` from the stored fit, equals the dense computation with
-    /// `V' = V + J Jᵀ`; without the Woodbury term it would not (the test's `J` moves it by
-    /// O(1) of the prior). So do the tolerances' covariance with the coefficients, their own
-    /// posterior variance and the coefficients' posterior mean at two nodes.
-    #[test]
-    fn module4_coefficient_covariance_carries_the_tolerances() {
+    /// The setting of the declared-tolerance tests: a fit with two tolerance columns `J` of
+    /// the data's size (they move every quantity by O(1)) and two `θ` nodes, its state at the
+    /// input `xs`, and the dense references: `V' = V + J Jᵀ` factored and `Cy` (`K x N_s`,
+    /// `Cy[k, (i, q)] = s cmat[i, k] B[q, k]`). Every eigen-pair of the 8 x 8 kernel matrices
+    /// is kept, so the consistent cross covariances are the exact kernel's (asserted) and the
+    /// dense reference applies.
+    struct ToleranceSetting {
+        fit: MarginalFit,
+        state: MarginalState,
+        cross: CrossCov,
+        xs: [f64; 1],
+        ax: [f64; 2],
+        prior: CoefficientPrior,
+        j: DMatrix<f64>,
+        cy: DMatrix<f64>,
+        inv: Cholesky,
+    }
+
+    fn tolerance_setting() -> ToleranceSetting {
         let n_e = 8;
         let x = DMatrix::from_fn(n_e, 1, |i, _| i as f64 / 2.0);
         let prior = CoefficientPrior {
@@ -1242,10 +1263,11 @@ mod tests {
             length_scales: vec![1.3],
             level_variance: 0.5,
         };
+        let b = DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]);
         let parts = LinearParts {
-            a: DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]),
+            a: b.clone(),
             l: DMatrix::identity(2, 2),
-            b: DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]),
+            b: b.clone(),
         };
         let amps = DMatrix::from_fn(n_e, 2, |i, k| 1.0 + 0.1 * (i + k) as f64);
         let (s, sigma2, n_s) = (1.3, 0.2, 3 * n_e);
@@ -1264,13 +1286,8 @@ mod tests {
         let (xs, ax) = ([1.7], [1.1, 0.9]);
         let cmat = fit.cross_cov(&xs, &ax, &x);
         let cross = state.cross_cov(&fit, &xs, &ax, &x);
-        // every eigen-pair of the 8 x 8 kernel matrices is kept here, so the consistent cross
-        // covariances are the exact kernel's (to rounding) and the dense reference applies
         assert!((&cross.cmat - &cmat).amax() < 1e-9 * cmat.amax());
-        let ours = state.coefficient_cov(&fit, &xs, &ax, &cross);
-        // dense: V' and Cy (K x N_s) with Cy[k, (i, q)] = s cmat[i, k] B[q, k]
         let k = prior.matrix(&x, &x);
-        let b = &parts.b;
         let mut v = DMatrix::identity(n_s, n_s) * sigma2 + &j * j.transpose();
         for c in 0..2 {
             v += DMatrix::from_fn(n_s, n_s, |r, q| {
@@ -1280,8 +1297,31 @@ mod tests {
         }
         let cy = DMatrix::from_fn(2, n_s, |c, r| s * cmat[(r / 3, c)] * b[(r % 3, c)]);
         let inv = Cholesky::new(&v, "V'").unwrap();
-        let prior_cov = prior_cov_at(&prior, &xs, &ax, s);
-        let dense = prior_cov - &cy * inv.solve(&cy.transpose()).unwrap();
+        ToleranceSetting {
+            fit,
+            state,
+            cross,
+            xs,
+            ax,
+            prior,
+            j,
+            cy,
+            inv,
+        }
+    }
+
+    /// Module 4's coefficient covariance with declared tolerances,
+    /// `s P − s² Cy V'⁻¹ Cyᵀ` from the stored fit, equals the dense computation with
+    /// `V' = V + J Jᵀ`; without the Woodbury term it would not (the test's `J` moves it by
+    /// O(1) of the prior). So do the tolerances' covariance with the coefficients and their
+    /// own posterior variance.
+    #[test]
+    fn module4_coefficient_covariance_carries_the_tolerances() {
+        let ts = tolerance_setting();
+        let (cy, inv, j) = (&ts.cy, &ts.inv, &ts.j);
+        let ours = ts.state.coefficient_cov(&ts.fit, &ts.xs, &ts.ax, &ts.cross);
+        let prior_cov = prior_cov_at(&ts.prior, &ts.xs, &ts.ax, ts.fit.amplitude);
+        let dense = prior_cov - cy * inv.solve(&cy.transpose()).unwrap();
         // a 24 x 24 solve with condition number about 1e3: rounding far below 1e-8 of the prior
         assert!(
             (&ours - &dense).amax() < 1e-8 * dense.amax().max(1.0),
@@ -1289,28 +1329,35 @@ mod tests {
         );
         // the tolerances' posterior with the coefficients (Module 4's predictions):
         // Cov(α, η | y) = −Cy V'⁻¹ J and Var(η | y) = I − Jᵀ V'⁻¹ J, densely
-        let (tol_cross, m_inv) = state.tolerance_cross(&cross).unwrap();
-        let v_j = inv.solve(&j).unwrap();
-        let dense_cross = -(&cy * &v_j);
+        let (tol_cross, m_inv) = ts.state.tolerance_cross(&ts.cross).unwrap();
+        let v_j = inv.solve(j).unwrap();
+        let dense_cross = -(cy * &v_j);
         let dense_var = DMatrix::identity(2, 2) - j.transpose() * &v_j;
         assert!(
             (&tol_cross - &dense_cross).amax() < 1e-8 * dense_cross.amax().max(1.0),
             "{tol_cross} vs {dense_cross}"
         );
         assert!((m_inv - &dense_var).amax() < 1e-8, "{m_inv} vs {dense_var}");
-        // the coefficients' mean s Cy V'⁻¹ (c − ρ a) at each node, and its slope in ρ
-        let terms = state.node_terms(&fit.nodes).unwrap();
-        let means = state.coefficient_means(&cross, &terms, &[0.3, 0.8]);
-        for (n, (mean, slope)) in fit.nodes.iter().zip(&means) {
-            let r = &n.c - &n.a * n.rho_mean;
-            let dense_mean = &cy
-                * inv
-                    .solve(&DMatrix::from_column_slice(n_s, 1, r.as_slice()))
-                    .unwrap();
-            let dense_slope = -(&cy
-                * inv
-                    .solve(&DMatrix::from_column_slice(n_s, 1, n.a.as_slice()))
-                    .unwrap());
+    }
+
+    /// Module 4's coefficient mean with declared tolerances, `s Cy V'⁻¹ (c − ρ a)` at each of
+    /// two nodes and its slope in `ρ`, equals the dense solve with `V' = V + J Jᵀ` (same
+    /// setting and bound as the covariance's test).
+    #[test]
+    fn module4_coefficient_mean_carries_the_tolerances() {
+        let ts = tolerance_setting();
+        let n_s = ts.j.nrows();
+        let dense_solve = |v: &DVector<f64>| {
+            &ts.cy
+                * ts.inv
+                    .solve(&DMatrix::from_column_slice(n_s, 1, v.as_slice()))
+                    .unwrap()
+        };
+        let terms = ts.state.node_terms(&ts.fit.nodes).unwrap();
+        let means = ts.state.coefficient_means(&ts.cross, &terms, &[0.3, 0.8]);
+        for (n, (mean, slope)) in ts.fit.nodes.iter().zip(&means) {
+            let dense_mean = dense_solve(&(&n.c - &n.a * n.rho_mean));
+            let dense_slope = -dense_solve(&n.a);
             assert!(
                 (mean - dense_mean.column(0)).amax() < 1e-8 * dense_mean.amax().max(1.0),
                 "{mean} vs {dense_mean}"
@@ -1332,6 +1379,26 @@ mod tests {
     /// amplified by that cancellation: 4.6e-9 measured when written). The former route,
     /// `s C (V⁻¹ r)` with Woodbury's subtraction, is computed beside it to show the check's
     /// power: it missed by 66 times the data's size when written (asserted: above 1e-3).
+    /// `B α̂` by the route Module 4 took before: `α̂_k = s Σ_i C_k(x, x_i) b_kᵀ (V⁻¹ r)_i` with
+    /// `V⁻¹ r` given (Woodbury's).
+    fn former_route_outputs(
+        b: &DMatrix<f64>,
+        cmat: &DMatrix<f64>,
+        vinv_r: &DMatrix<f64>,
+        s: f64,
+    ) -> DVector<f64> {
+        let n_o = b.nrows();
+        let alpha = DVector::from_fn(b.ncols(), |k, _| {
+            (0..cmat.nrows())
+                .map(|j| {
+                    let bv: f64 = (0..n_o).map(|q| b[(q, k)] * vinv_r[(j * n_o + q, 0)]).sum();
+                    s * cmat[(j, k)] * bv
+                })
+                .sum::<f64>()
+        });
+        b * alpha
+    }
+
     #[test]
     fn module4_coefficient_mean_reproduces_the_fit_at_the_experiments() {
         let (n_e, n_o, n_k) = (80, 7, 12);
@@ -1393,16 +1460,7 @@ mod tests {
             let cross = state.cross_cov(&fit, &xi, &ax, &x);
             let (mean, _) = state.coefficient_means(&cross, &terms, &[rho]).remove(0);
             let fitted = &b * mean;
-            let former = &b
-                * DVector::from_fn(n_k, |k, _| {
-                    (0..n_e)
-                        .map(|j| {
-                            let bv: f64 =
-                                (0..n_o).map(|q| b[(q, k)] * vinv_r[(j * n_o + q, 0)]).sum();
-                            s * cross.cmat[(j, k)] * bv
-                        })
-                        .sum::<f64>()
-                });
+            let former = former_route_outputs(&b, &cross.cmat, &vinv_r, s);
             for q in 0..n_o {
                 let want = smoother[(i * n_o + q, 0)];
                 ours_worst = ours_worst.max((fitted[q] - want).abs() / scale);

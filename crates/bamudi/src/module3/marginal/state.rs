@@ -60,7 +60,7 @@ impl MarginalState {
         if let Some(j) = &fit.tolerance_columns
             && j.nrows() != lr.n_obs()
         {
-            return Err(crate::error::BamudiError::dim(
+            return Err(BamudiError::dim(
                 "tolerance columns of the marginal fit (rows) vs the observations",
                 lr.n_obs(),
                 j.nrows(),
