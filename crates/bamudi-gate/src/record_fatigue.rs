@@ -266,6 +266,28 @@ fn count_lockages(history: &LoadHistory) -> f64 {
 /// enter the counters in order: 64 rows of 400 draws hold about 3e6 line loads.
 const ROWS_PER_CHUNK: usize = 64;
 
+/// The prior mean of the gap (8-point quadrature of the prior; in), the nominal model's `θ`.
+fn prior_mean_theta(model: &GateMultiLevel) -> Result<f64> {
+    let rule = model.prior.quadrature(8)?;
+    Ok(rule
+        .nodes
+        .iter()
+        .zip(&rule.weights)
+        .map(|(t, w)| t[0] * w)
+        .sum())
+}
+
+/// Damage over the record scaled to 1,000 lockages (zero without lockages).
+fn per_1000_lockages(damage: Vec<f64>, lockages: f64) -> Vec<f64> {
+    damage
+        .into_iter()
+        .map(|v| match lockages > 0.0 {
+            true => v * 1000.0 / lockages,
+            false => 0.0,
+        })
+        .collect()
+}
+
 /// The true line loads (normal then tangential, lbf/in) at a row of the history, when known.
 pub type TrueForces<'a> = &'a dyn Fn(usize, &[f64; 2]) -> Result<Vec<f64>>;
 
@@ -291,19 +313,18 @@ pub fn record_fatigue(
     let mut after: Vec<PointCounters> = (0..opts.n_draws).map(|_| PointCounters::new(n)).collect();
     let mut before = PointCounters::new(n);
     let mut true_counters = truth.map(|_| PointCounters::new(n));
-    let rule = model.prior.quadrature(8)?;
-    let nominal_theta = [rule
-        .nodes
-        .iter()
-        .zip(&rule.weights)
-        .map(|(t, w)| t[0] * w)
-        .sum::<f64>()];
+    let nominal_theta = [prior_mean_theta(model)?];
     // the draws and the nominal response of a chunk of rows in parallel (contact solves,
     // most of the time), then pushed in the record's order (the rainflow counts need it)
     for (chunk_index, chunk) in history.x.chunks(ROWS_PER_CHUNK).enumerate() {
         let rows = chunk
             .par_iter()
-            .map(|x| Ok((predictor.draws_at(&paths, x)?, prior_mean_response(model, x)?)))
+            .map(|x| {
+                Ok((
+                    predictor.draws_at(&paths, x)?,
+                    prior_mean_response(model, x)?,
+                ))
+            })
             .collect::<Result<Vec<_>>>()?;
         for (i, (x, (draws, nominal))) in chunk.iter().zip(rows).enumerate() {
             for (k, d) in draws.iter().enumerate() {
@@ -311,22 +332,17 @@ pub fn record_fatigue(
             }
             before.push(block, x, &nominal_theta, &nominal)?;
             if let (Some(f), Some(c)) = (truth, true_counters.as_mut()) {
-                c.push(block, x, &nominal_theta, &f(chunk_index * ROWS_PER_CHUNK + i, x)?)?;
+                c.push(
+                    block,
+                    x,
+                    &nominal_theta,
+                    &f(chunk_index * ROWS_PER_CHUNK + i, x)?,
+                )?;
             }
         }
     }
     let lockages = count_lockages(history);
-    let per_1000 = |d: Vec<f64>| -> Vec<f64> {
-        d.into_iter()
-            .map(|v| {
-                if lockages > 0.0 {
-                    v * 1000.0 / lockages
-                } else {
-                    0.0
-                }
-            })
-            .collect()
-    };
+    let per_1000 = |d: Vec<f64>| per_1000_lockages(d, lockages);
     let draws: Vec<Vec<f64>> = after
         .iter_mut()
         .map(|c| per_1000(c.finish(block)))
