@@ -181,7 +181,9 @@ mod tests {
     /// in turn, 20 data sets. Asserted: the mean of `χ²/df` within 0.15 of 1 (its sd here is
     /// about 0.03: 140 statistics of sd 0.22, correlated within a data set) and the largest
     /// below 3 (the 0.999 quantile of `χ²₄₀/40` is 1.9). Measured when written: mean 1.017,
-    /// largest 1.79; the same at `t λ_max` 1.5e12 and 1.5e16.
+    /// largest 1.79; the same at `t λ_max` 1.5e12 and 1.5e16. On the same data with a reality
+    /// the model lacks (gauge 3 drifting linearly to 3 noise sd), the statistic still flags
+    /// that gauge.
     #[test]
     fn gauge_deletion_keeps_its_null_distribution_when_ill_conditioned() {
         use rand::{SeedableRng, rngs::StdRng};
@@ -205,8 +207,17 @@ mod tests {
         let mut normal =
             |m: usize| DVector::from_fn(m, |_, _| numerics::random::standard_normal(&mut rng));
         let mut stats = Vec::new();
+        let mut faulty = Vec::new();
         for _ in 0..20 {
             let c = &w * normal(r) * s.sqrt() + normal(n) * sigma2.sqrt() + x.column(0) * 0.7;
+            // a reality the model lacks: the third gauge drifts by up to 3 noise sd
+            let drifted = DVector::from_fn(n, |i, _| match i % n_o == 2 {
+                true => 3.0 * (i / n_o) as f64 / n_e as f64,
+                false => 0.0,
+            }) + &c;
+            let rows: Vec<usize> = (0..n_e).map(|i| i * n_o + 2).collect();
+            let rm = ResidualModel::new(z.clone(), t, sigma2, &x, drifted).unwrap();
+            faulty.push(rm.delete_block(&rows, "gauge").unwrap().chi2 / n_e as f64);
             let rm = ResidualModel::new(z.clone(), t, sigma2, &x, c).unwrap();
             for q in 0..n_o {
                 let rows: Vec<usize> = (0..n_e).map(|i| i * n_o + q).collect();
@@ -217,6 +228,10 @@ mod tests {
         let largest = stats.iter().copied().fold(0.0f64, f64::max);
         assert!((mean - 1.0).abs() < 0.15, "mean χ²/df {mean}");
         assert!(largest < 3.0, "largest χ²/df {largest}");
+        // and they still see a gauge that drifts: above the null's 0.99 quantile (1.59) in at
+        // least 18 of 20 data sets (measured when written: all 20, mean 2.2)
+        let seen = faulty.iter().filter(|v| **v > 1.59).count();
+        assert!(seen >= 18, "the drift was seen in {seen} of 20: {faulty:?}");
     }
 
     #[test]
