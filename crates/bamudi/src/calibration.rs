@@ -530,15 +530,12 @@ impl Calibration {
             return Ok(());
         };
         for (j, node) in fit.nodes.iter().enumerate() {
-            for (what, v) in [("c", &node.c), ("a", &node.a)] {
-                if v.len() != n_s {
-                    return Err(format!(
-                        "module3.marginal.nodes[{j}].{what} has {} entries, expected {n_s} (one \
-                         per observation; a calibration saved by an older bamudi lacks them: \
-                         calibrate again)",
-                        v.len()
-                    ));
-                }
+            if let Some((what, len)) = node.column_mismatch(n_s) {
+                return Err(format!(
+                    "module3.marginal.nodes[{j}].{what} has {len} entries, expected {n_s} (one \
+                     per observation; a calibration saved by an older bamudi lacks them: \
+                     calibrate again)"
+                ));
             }
         }
         Ok(())

@@ -285,8 +285,7 @@ fn covariance_factor(cov: &nalgebra::DMatrix<f64>, x: &[f64]) -> Result<nalgebra
             context: format!("{what} = {x:?}"),
             reason: format!(
                 "smallest eigenvalue {min:.3e} against a largest of {max:.3e}, beyond the \
-                 {INDEFINITE_TOLERANCE:e} that the low-rank prior's truncation explains \
-                 ({chol_err})"
+                 {INDEFINITE_TOLERANCE:e} that numerical error explains ({chol_err})"
             ),
         });
     }

@@ -431,26 +431,28 @@ impl Spectrum {
         qa.tr_mul(&self.shrink(qb, t))
     }
 
-    /// The coordinates `y` of cross covariances `Cᵀ = W G` in the eigenbasis and the weights
-    /// `w` with `s Gᵀ Wᵀ V⁻¹ v = yᵀ diag(w) (Qᵀ Wᵀ v)` for every `v` projected by
-    /// [`project`](Self::project). Primal: `y = QᵀG`, `w = t/(1 + tλ)` (from
+    /// The coordinates `y` of cross covariances `Cᵀ = W G` in the eigenbasis; with the weights
+    /// `w` of [`cross_weights`](Self::cross_weights), `s Gᵀ Wᵀ V⁻¹ v = yᵀ diag(w) (Qᵀ Wᵀ v)`
+    /// for every `v` projected by [`project`](Self::project). Primal: `y = QᵀG`, `w = t/(1 + tλ)` (from
     /// `Wᵀ V⁻¹ = Q diag(1/(σ²(1 + tλ))) Qᵀ Wᵀ`). Dual: `y = Λ^{1/2} Pᵀ W G`,
     /// `w = t/(λ(1 + tλ))` over `λ_j > NULL_DIRECTION · λ_max` (`W G` lies in their span).
-    fn cross_coordinates(
-        &self,
-        lr: &LowRank,
-        g: &DMatrix<f64>,
-        t: f64,
-    ) -> (DMatrix<f64>, DVector<f64>) {
+    pub(crate) fn coordinates(&self, lr: &LowRank, g: &DMatrix<f64>) -> DMatrix<f64> {
         match &self.basis {
-            Basis::Primal { qt, .. } => (qt * g, self.lambda.map(|l| t / (1.0 + t * l))),
-            Basis::Dual { wqt, .. } => {
+            Basis::Primal { qt, .. } => qt * g,
+            Basis::Dual { wqt, .. } => wqt * lr.w(g),
+        }
+    }
+
+    /// The weights `w` of [`coordinates`](Self::coordinates) at `t`.
+    fn cross_weights(&self, t: f64) -> DVector<f64> {
+        match &self.basis {
+            Basis::Primal { .. } => self.lambda.map(|l| t / (1.0 + t * l)),
+            Basis::Dual { .. } => {
                 let cut = NULL_DIRECTION * self.lambda_max();
-                let weight = self.lambda.map(|l| match l > cut {
+                self.lambda.map(|l| match l > cut {
                     true => t / (l * (1.0 + t * l)),
                     false => 0.0,
-                });
-                (wqt * lr.w(g), weight)
+                })
             }
         }
     }
@@ -484,7 +486,13 @@ impl Spectrum {
     /// assert!((ours - dense).amax() < 1e-9);
     /// ```
     pub fn explained(&self, lr: &LowRank, g: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
-        let (y, weight) = self.cross_coordinates(lr, g, t);
+        self.explained_of(&self.coordinates(lr, g), t)
+    }
+
+    /// [`explained`](Self::explained) from the coordinates `y` of `G`
+    /// ([`coordinates`](Self::coordinates)).
+    pub(crate) fn explained_of(&self, y: &DMatrix<f64>, t: f64) -> DMatrix<f64> {
+        let weight = self.cross_weights(t);
         // Qᵀ Wᵀ (W G): Λ y in the primal form, y itself in the dual one
         let scaled = match &self.basis {
             Basis::Primal { .. } => DMatrix::from_fn(y.nrows(), y.ncols(), |j, c| {
@@ -499,7 +507,7 @@ impl Spectrum {
 
     /// `s C V⁻¹ v` for cross covariances `Cᵀ = W G` (coordinates `G`, `R x K`) and
     /// observations given by their projections `qv = Qᵀ Wᵀ v` ([`project`](Self::project)):
-    /// `yᵀ diag(w) qv` (`K x c`, [`cross_coordinates`](Self::cross_coordinates)). The
+    /// `yᵀ diag(w) qv` (`K x c`, [`coordinates`](Self::coordinates)). The
     /// coefficients' posterior mean is this with `v` the residual of the model. Unlike
     /// `s C (V⁻¹ v)` with Woodbury's `V⁻¹ v = (v − t W Q (I + tΛ)⁻¹ Qᵀ Wᵀ v)/σ²`, whose
     /// components along the well-seen directions are small differences of large terms, no
@@ -535,7 +543,18 @@ impl Spectrum {
         qv: &DMatrix<f64>,
         t: f64,
     ) -> DMatrix<f64> {
-        let (y, weight) = self.cross_coordinates(lr, g, t);
+        self.explained_cross_of(&self.coordinates(lr, g), qv, t)
+    }
+
+    /// [`explained_cross`](Self::explained_cross) from the coordinates `y` of `G`
+    /// ([`coordinates`](Self::coordinates)).
+    pub(crate) fn explained_cross_of(
+        &self,
+        y: &DMatrix<f64>,
+        qv: &DMatrix<f64>,
+        t: f64,
+    ) -> DMatrix<f64> {
+        let weight = self.cross_weights(t);
         let scaled = DMatrix::from_fn(qv.nrows(), qv.ncols(), |j, c| qv[(j, c)] * weight[j]);
         y.tr_mul(&scaled)
     }

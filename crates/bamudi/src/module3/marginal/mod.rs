@@ -244,6 +244,17 @@ pub struct MarginalNode {
     pub a: DVector<f64>,
 }
 
+impl MarginalNode {
+    /// The first of the columns `c`, `a` without one entry per observation (`n_s`), with its
+    /// length (a calibration file edited, or saved before the nodes kept them).
+    pub(crate) fn column_mismatch(&self, n_s: usize) -> Option<(&'static str, usize)> {
+        [("c", &self.c), ("a", &self.a)]
+            .into_iter()
+            .find(|(_, v)| v.len() != n_s)
+            .map(|(what, v)| (what, v.len()))
+    }
+}
+
 /// Most support points stored for Module 4.
 const STORED_NODES: usize = 32;
 
@@ -1141,6 +1152,15 @@ mod tests {
         }
     }
 
+    /// The model parts of a discrepancy whose basis is the identity (`L = I`, `A = B = b`).
+    fn identity_basis(b: &DMatrix<f64>) -> LinearParts {
+        LinearParts {
+            a: b.clone(),
+            l: DMatrix::identity(b.ncols(), b.ncols()),
+            b: b.clone(),
+        }
+    }
+
     /// A fit with the test's priors, coefficient scales at the experiments, amplitude `s` and
     /// declared tolerances' columns (no θ nodes: the covariance tests need none).
     fn test_fit(
@@ -1196,11 +1216,7 @@ mod tests {
         let b = DMatrix::from_fn(7, 3, |q, k| {
             0.03 * (((q * 3 + k * 5) % 7) as f64 / 3.0 - 1.0)
         });
-        let parts = LinearParts {
-            a: b.clone(),
-            l: DMatrix::identity(3, 3),
-            b: b.clone(),
-        };
+        let parts = identity_basis(&b);
         let amps = DMatrix::from_fn(n_e, 3, |i, k| 6e3 * (1.0 + 0.01 * (i + k) as f64));
         let (s, sigma2) = (1.0, 1.0);
         let fit = test_fit(vec![prior.clone(); 3], amps, s, None);
@@ -1264,11 +1280,7 @@ mod tests {
             level_variance: 0.5,
         };
         let b = DMatrix::from_row_slice(3, 2, &[1.0, 0.5, -0.3, 2.0, 0.7, 0.1]);
-        let parts = LinearParts {
-            a: b.clone(),
-            l: DMatrix::identity(2, 2),
-            b: b.clone(),
-        };
+        let parts = identity_basis(&b);
         let amps = DMatrix::from_fn(n_e, 2, |i, k| 1.0 + 0.1 * (i + k) as f64);
         let (s, sigma2, n_s) = (1.3, 0.2, 3 * n_e);
         let j = DMatrix::from_fn(n_s, 2, |r, c| ((r * (c + 2)) % 5) as f64 * 0.4 - 0.6);
@@ -1414,11 +1426,7 @@ mod tests {
         let b = DMatrix::from_fn(n_o, n_k, |q, k| {
             0.05 * ((q as f64 + 1.0) * (k as f64 + 1.0) * 0.7).cos() / (1.0 + k as f64 * 0.3)
         });
-        let parts = LinearParts {
-            a: b.clone(),
-            l: DMatrix::identity(n_k, n_k),
-            b: b.clone(),
-        };
+        let parts = identity_basis(&b);
         let amps = DMatrix::from_fn(n_e, n_k, |i, k| {
             2e4 * (1.0 + 0.2 * ((i + 3 * k) % 5) as f64)
         });

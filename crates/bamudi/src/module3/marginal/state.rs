@@ -45,6 +45,11 @@ pub struct CrossCov {
     pub cmat: DMatrix<f64>,
     /// Their coordinates `G` in the columns of `W` (`R x K`): `cmat[:, k] ⊗ b_k = W G[:, k]`.
     pub coords: DMatrix<f64>,
+    /// `G` in the spectrum's eigenbasis ([`Spectrum::coordinates`]), computed once for the
+    /// mean, the covariance and the tolerances' terms at this input.
+    ///
+    /// [`Spectrum::coordinates`]: super::Spectrum::coordinates
+    projected: DMatrix<f64>,
 }
 
 impl MarginalState {
@@ -88,7 +93,7 @@ impl MarginalState {
     /// experiments, consistent with the truncated prior the data were conditioned on
     /// ([`LowRank`] keeps each kernel matrix's leading eigen-pairs): each coefficient's
     /// correlation part projected onto its kept eigenvectors, its level part exact
-    /// ([`LowRank::factor_coordinates`]). [`MarginalFit::cross_cov`] is the exact kernel's.
+    /// ([`LowRank::factor_coordinates`]).
     pub fn cross_cov(
         &self,
         fit: &MarginalFit,
@@ -104,6 +109,7 @@ impl MarginalState {
         let mut cross = CrossCov {
             cmat: DMatrix::zeros(n_e, fit.priors.len()),
             coords: DMatrix::zeros(lr.rank(), fit.priors.len()),
+            projected: DMatrix::zeros(0, 0),
         };
         for (k, prior) in fit.priors.iter().enumerate() {
             let scale = |i: usize| ax[k] * fit.amplitudes[(i, k)];
@@ -117,6 +123,7 @@ impl MarginalState {
                 .view_mut((offset, k), (g.len(), 1))
                 .copy_from(&g);
         }
+        cross.projected = self.cov.spectrum.coordinates(lr, &cross.coords);
         cross
     }
 
@@ -160,7 +167,7 @@ impl MarginalState {
         let (cov, s) = (&self.cov, fit.amplitude);
         let k = fit.priors.len();
         // s² Cy V⁻¹ Cyᵀ, without Woodbury's cancellation (see above)
-        let mut explained = cov.spectrum.explained(&cov.lr, &cross.coords, cov.t()) * s;
+        let mut explained = cov.spectrum.explained_of(&cross.projected, cov.t()) * s;
         if let Some(tol) = &self.tolerance_terms {
             // Woodbury: s² Cy V'⁻¹ Cyᵀ = s² Cy V⁻¹ Cyᵀ − D M⁻¹ Dᵀ, D = s Cy V⁻¹ J
             let d = self.cy_vinv_j(tol, cross);
@@ -189,7 +196,7 @@ impl MarginalState {
     fn cy_vinv_j(&self, tol: &ToleranceTerms, cross: &CrossCov) -> DMatrix<f64> {
         let cov = &self.cov;
         cov.spectrum
-            .explained_cross(&cov.lr, &cross.coords, &tol.projected, cov.t())
+            .explained_cross_of(&cross.projected, &tol.projected, cov.t())
     }
 
     /// The nodes' residual columns `c = y − b(θ)` and `a = A g(θ)` projected on the
@@ -200,16 +207,14 @@ impl MarginalState {
         let n_s = self.cov.lr.n_obs();
         let mut cols = Vec::with_capacity(2 * nodes.len());
         for (j, node) in nodes.iter().enumerate() {
-            for (what, v) in [("c", &node.c), ("a", &node.a)] {
-                if v.len() != n_s {
-                    return Err(BamudiError::dim(
-                        format!("column `{what}` of marginal node {j} vs the observations"),
-                        n_s,
-                        v.len(),
-                    ));
-                }
-                cols.push(v.clone());
+            if let Some((what, len)) = node.column_mismatch(n_s) {
+                return Err(BamudiError::dim(
+                    format!("column `{what}` of marginal node {j} vs the observations"),
+                    n_s,
+                    len,
+                ));
             }
+            cols.extend([node.c.clone(), node.a.clone()]);
         }
         let ca = match cols.is_empty() {
             true => DMatrix::zeros(n_s, 0),
@@ -244,7 +249,7 @@ impl MarginalState {
         let cov = &self.cov;
         let mut e = cov
             .spectrum
-            .explained_cross(&cov.lr, &cross.coords, &terms.projected, cov.t());
+            .explained_cross_of(&cross.projected, &terms.projected, cov.t());
         if let (Some(tol), Some(jr)) = (&self.tolerance_terms, &terms.tolerance) {
             // s Cy V'⁻¹ v = s Cy V⁻¹ v − (s Cy V⁻¹ J) M⁻¹ Jᵀ V⁻¹ v
             e -= self.cy_vinv_j(tol, cross) * jr;
@@ -260,9 +265,16 @@ impl MarginalState {
 }
 
 impl MarginalFit {
-    /// `C_k(x, x_i)` for every experiment and coefficient (`N_e x K`), with the scales `ax` of
-    /// the coefficients at `x`.
-    pub fn cross_cov(&self, x: &[f64], ax: &[f64], experiments: &DMatrix<f64>) -> DMatrix<f64> {
+    /// `C_k(x, x_i)` of the exact kernel for every experiment and coefficient (`N_e x K`), with
+    /// the scales `ax` of the coefficients at `x`: the tests' reference for
+    /// [`MarginalState::cross_cov`], which is consistent with the truncated prior.
+    #[cfg(test)]
+    pub(crate) fn cross_cov(
+        &self,
+        x: &[f64],
+        ax: &[f64],
+        experiments: &DMatrix<f64>,
+    ) -> DMatrix<f64> {
         DMatrix::from_fn(experiments.nrows(), self.priors.len(), |i, k| {
             let xi: Vec<f64> = experiments.row(i).iter().copied().collect();
             ax[k] * self.amplitudes[(i, k)] * self.priors[k].cov(x, &xi)
