@@ -11,11 +11,11 @@
 
 use anyhow::Result;
 use bamudi::Calibration;
-use bamudi_gate::paper::ScenarioResult;
+use bamudi_gate::paper::{ScenarioResult, prior_mean_response};
 use mitergate::GateMultiLevel;
 use mitergate::data::truth::{self, Scenario};
-use mlmodel::UnobservableModel;
 use plotters::prelude::*;
+use rayon::prelude::*;
 use std::path::Path;
 
 pub(crate) use bamudi_gate::report::plot::Series;
@@ -37,17 +37,6 @@ pub(crate) fn line_plot(
 ) -> Result<()> {
     bamudi_gate::report::plot::line_plot(path, &Axes::new(title, xlabel, ylabel), all)?;
     Ok(())
-}
-
-fn prior_mean(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
-    let rule = model.prior.quadrature(8)?;
-    let n = model.unobservable.response_len();
-    let (mut acc, mut g) = (vec![0.0; n], vec![0.0; n]);
-    for (t, w) in rule.nodes.iter().zip(&rule.weights) {
-        model.unobservable.evaluate(x, t, &mut g)?;
-        acc.iter_mut().zip(&g).for_each(|(a, v)| *a += w * v);
-    }
-    Ok(acc)
 }
 
 /// The 1-99 % quantile range of `values`, padded 10 %.
@@ -102,9 +91,10 @@ pub fn scenario_plots(
     };
     let truth_f = truth::true_forces(&scenario, contact, x)?;
     let delta = truth::true_discrepancy(x, &d, scenario.theta_true, scenario.discrepancy_scale);
-    let disc = cal.predictor(model)?.discrepancy(&x)?;
-    let resp = cal.predictor(model)?.response(&x)?;
-    let before = prior_mean(model, &x)?;
+    let predictor = cal.predictor(model)?;
+    let disc = predictor.discrepancy(&x)?;
+    let resp = predictor.response(&x)?;
+    let before = prior_mean_response(model, &x)?;
     let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
     for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         let r = c * nu..(c + 1) * nu;
@@ -223,16 +213,20 @@ fn normal_force_error(p: &ScenarioPlots<'_>) -> Result<()> {
         let l: Vec<f64> = (0..25).map(|i| 130.0 + 610.0 * i as f64 / 24.0).collect();
         (l.clone(), l.iter().map(|&h| [h, 120.0]).collect())
     };
-    let (mut eb, mut ea) = (vec![], vec![]);
-    for x in &xs {
-        let t = truth::true_forces(scenario, contact, *x)?;
-        let b = prior_mean(model, x)?;
-        let a = cal.predictor(model)?.response(x)?.mean;
-        let r =
-            |p: &[f64]| ((0..nu).map(|i| (p[i] - t[i]).powi(2)).sum::<f64>() / nu as f64).sqrt();
-        eb.push(r(&b));
-        ea.push(r(&a));
-    }
+    let predictor = cal.predictor(model)?;
+    let errors: Vec<(f64, f64)> = xs
+        .par_iter()
+        .map(|x| -> Result<(f64, f64)> {
+            let t = truth::true_forces(scenario, contact, *x)?;
+            let b = prior_mean_response(model, x)?;
+            let a = predictor.response(x)?.mean;
+            let r = |p: &[f64]| {
+                ((0..nu).map(|i| (p[i] - t[i]).powi(2)).sum::<f64>() / nu as f64).sqrt()
+            };
+            Ok((r(&b), r(&a)))
+        })
+        .collect::<Result<_>>()?;
+    let (eb, ea): (Vec<f64>, Vec<f64>) = errors.into_iter().unzip();
     let xl = if number == 1 {
         "downstream level h_down (in), h_up = 738 in"
     } else {
@@ -263,22 +257,26 @@ fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
     let a_idx = d.partition_point(|&z| z < 0.25 * contact.gate().quoin_height);
     // a quarter-hour step: the lockage cycle is 8 h, an hourly step draws it as a zig-zag
     let hours: Vec<f64> = (0..=4 * 168).map(|q| q as f64 / 4.0).collect();
-    let mut cols: [Vec<f64>; 6] = Default::default();
-    for &h in &hours {
-        let phase = (h / 8.0 * std::f64::consts::TAU).sin();
-        let x = [
-            560.0 + 150.0 * phase.max(-0.9),
-            60.0 + 20.0 * (h / 24.0 * std::f64::consts::TAU).cos(),
-        ];
-        let t = truth::true_forces(scenario, contact, x)?;
-        let b = prior_mean(model, &x)?;
-        let a = cal.predictor(model)?.response(&x)?;
-        for (c, off) in [(0usize, 0usize), (3, nu)] {
-            cols[c].push(t[off + a_idx]);
-            cols[c + 1].push(b[off + a_idx]);
-            cols[c + 2].push(a.mean[off + a_idx]);
-        }
-    }
+    // the hours are independent: one predictor, rows in parallel (collected in order)
+    let predictor = cal.predictor(model)?;
+    let rows: Vec<[f64; 6]> = hours
+        .par_iter()
+        .map(|&h| -> Result<[f64; 6]> {
+            let phase = (h / 8.0 * std::f64::consts::TAU).sin();
+            let x = [
+                560.0 + 150.0 * phase.max(-0.9),
+                60.0 + 20.0 * (h / 24.0 * std::f64::consts::TAU).cos(),
+            ];
+            let t = truth::true_forces(scenario, contact, x)?;
+            let b = prior_mean_response(model, &x)?;
+            let a = predictor.response(&x)?.mean;
+            let (i, j) = (a_idx, nu + a_idx);
+            Ok([t[i], b[i], a[i], t[j], b[j], a[j]])
+        })
+        .collect::<Result<_>>()?;
+    let cols: Vec<Vec<f64>> = (0..6)
+        .map(|c| rows.iter().map(|r| r[c]).collect())
+        .collect();
     let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
     for (c, name, fig) in [(0usize, "normal", 21), (3, "tangential", 22)] {
         line_plot(

@@ -23,7 +23,7 @@ pub mod fatigue;
 mod markdown;
 pub(crate) mod score;
 pub use score::DiscrepancyScore;
-pub(crate) use score::prior_mean_response;
+pub use score::prior_mean_response;
 mod sensitivity;
 
 pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rules};

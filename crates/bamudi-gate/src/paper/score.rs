@@ -7,6 +7,7 @@ use mitergate::data::truth::{self, Scenario};
 use mitergate::{ContactModel, GateMultiLevel};
 use mlmodel::{LinearObservableModel, ObservableModel, UnobservableModel};
 use nalgebra::DVector;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub(super) fn rms(values: impl Iterator<Item = f64>) -> f64 {
@@ -18,8 +19,20 @@ pub(super) fn rms(values: impl Iterator<Item = f64>) -> f64 {
     (ss / n.max(1) as f64).sqrt()
 }
 
-/// Prior-averaged response `Σ_j w_j g_u(x, θ_j)` (Eq. 2), the "before calibration" model.
-pub(crate) fn prior_mean_response(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
+/// Prior-averaged response `Σ_j w_j g_u(x, θ_j)` (Eq. 2, Gauss quadrature of order 8 over the
+/// gap prior), the "before calibration" model: contact line loads (lbf/in), blocked
+/// `[F_N; F_T]`.
+///
+/// ```
+/// let contact = mitergate::contact::ContactParams::default()
+///     .build(mitergate::testing::doc_gate())
+///     .unwrap();
+/// let model = bamudi_gate::paper::gate_model(&contact, (60.0, 150.0)).unwrap();
+/// let before = bamudi_gate::paper::prior_mean_response(&model, &[700.0, 100.0]).unwrap();
+/// assert_eq!(before.len(), 10); // 5 points, normal and tangential
+/// assert!(before[..5].iter().all(|&f| f >= 0.0)); // an average of no-tension forces
+/// ```
+pub fn prior_mean_response(model: &GateMultiLevel, x: &[f64]) -> Result<Vec<f64>> {
     let rule = model.prior.quadrature(8)?;
     weighted_response(model, x, rule.nodes.iter().map(|t| t[0]).zip(rule.weights))
 }
@@ -123,11 +136,17 @@ where
 {
     let nu = contact.gate().n_points();
     let no_delta = scenario.clone().discrepancy_scale(0.0);
+    // the conditions in parallel (contact solves), tallied in their order
+    let per_x = new_x
+        .par_iter()
+        .map(|x| -> Result<_> {
+            let with = truth::true_forces(scenario, contact, *x)?;
+            let without = truth::true_forces(&no_delta, contact, *x)?;
+            Ok((with, without, predictor.discrepancy(x)?))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let (mut n, mut t) = (DeltaTally::default(), DeltaTally::default());
-    for x in new_x {
-        let with = truth::true_forces(scenario, contact, *x)?;
-        let without = truth::true_forces(&no_delta, contact, *x)?;
-        let band = predictor.discrepancy(x)?;
+    for (with, without, band) in per_x {
         for b in 0..2 * nu {
             let tally = if b < nu { &mut n } else { &mut t };
             tally.add(with[b] - without[b], &band, b);
@@ -154,12 +173,21 @@ pub(super) fn score(
 ) -> Result<Scores> {
     let nu = contact.gate().n_points();
     let predictor = cal.predictor(model)?;
+    // the conditions in parallel (contact solves), the errors collected in their order
+    let per_x = new_x
+        .par_iter()
+        .map(|x| -> Result<_> {
+            let truth_f = truth::true_forces(scenario, contact, *x)?;
+            let before = prior_mean_response(model, x)?;
+            let after = predictor.response(x)?.mean;
+            let with = predictor.outputs(x)?.mean;
+            let without = no_discrepancy_strain(model, cal, x)?;
+            Ok((x, truth_f, before, after, with, without))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let (mut dn_b, mut dn_a, mut dt_b, mut dt_a) = (vec![], vec![], vec![], vec![]);
     let (mut ds_w, mut ds_wo) = (vec![], vec![]);
-    for x in new_x {
-        let truth_f = truth::true_forces(scenario, contact, *x)?;
-        let before = prior_mean_response(model, x)?;
-        let after = predictor.response(x)?.mean;
+    for (x, truth_f, before, after, with, without) in per_x {
         for b in 0..2 * nu {
             let (eb, ea) = (before[b] - truth_f[b], after[b] - truth_f[b]);
             if b < nu {
@@ -171,8 +199,6 @@ pub(super) fn score(
             }
         }
         let true_strain = contact.gate().strain(&truth_f, x[0], x[1]);
-        let with = predictor.outputs(x)?.mean;
-        let without = no_discrepancy_strain(model, cal, x)?;
         for p in 0..true_strain.len() {
             ds_w.push(with[p] - true_strain[p]);
             ds_wo.push(without[p] - true_strain[p]);
