@@ -14,8 +14,9 @@
 //!   exports the default gate to CalculiX, runs `ccx` and compares gauge strains and
 //!   displacements (needs `ccx` on PATH; see docs/verification.md).
 //! * `bench [--filter TEXT] [--no-anchors] [--python PATH] [--anchors DIR] [--profile]
-//!   [--out PATH]`: criterion benchmarks and the Python peers in one run, as ratios in
-//!   `docs/benchmarks.md` (and a profile of the quick reproduction with `--profile`).
+//!   [--profile-paper] [--out PATH]`: criterion benchmarks and the Python peers in one run, as
+//!   ratios in `docs/benchmarks.md` (and a profile of the quick reproduction with `--profile`,
+//!   of the paper-size one with `--profile-paper`).
 
 mod adequacy;
 mod bench;
