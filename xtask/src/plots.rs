@@ -225,6 +225,8 @@ fn normal_force_error(p: &ScenarioPlots<'_>) -> Result<()> {
             };
             Ok((r(&b), r(&a)))
         })
+        .collect::<Vec<_>>() // every row first: an error is then the first in their order
+        .into_iter()
         .collect::<Result<_>>()?;
     let (eb, ea): (Vec<f64>, Vec<f64>) = errors.into_iter().unzip();
     let xl = if number == 1 {
@@ -273,6 +275,8 @@ fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
             let (i, j) = (a_idx, nu + a_idx);
             Ok([t[i], b[i], a[i], t[j], b[j], a[j]])
         })
+        .collect::<Vec<_>>() // every row first: an error is then the first in their order
+        .into_iter()
         .collect::<Result<_>>()?;
     let cols: Vec<Vec<f64>> = (0..6)
         .map(|c| rows.iter().map(|r| r[c]).collect())

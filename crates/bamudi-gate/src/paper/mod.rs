@@ -284,8 +284,8 @@ pub struct ReproduceReport {
 /// The paper's LSTM (hidden 64, one layer, 10 scalar steps) with a budget of 60 epochs and
 /// early stopping (patience 10) on a 10 % validation split. Each mini-batch's gradient is
 /// computed in two shards on two threads (the reproduction took 226.7 s with one and
-/// 215.2 s with two, on 2 cores); the count is fixed, so the trained network is the same on
-/// any machine. It differs from the one-shard network by the summation order only, which the
+/// 215.2 s with two, on 2 cores); the count is fixed, so the trained network does not depend
+/// on the machine's core count or the thread schedule. It differs from the one-shard network by the summation order only, which the
 /// training amplifies: the LSTM-based numbers moved by up to 1.1 % (the conditional mode's
 /// tangential RMSE, scenario 1) and θ by 0.01 in.
 fn bamudi_lstm_paper() -> bamudi::module2::estimator::LstmSettings {

@@ -144,6 +144,8 @@ where
             let without = truth::true_forces(&no_delta, contact, *x)?;
             Ok((with, without, predictor.discrepancy(x)?))
         })
+        .collect::<Vec<_>>() // every condition first: an error is then the first in their order
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let (mut n, mut t) = (DeltaTally::default(), DeltaTally::default());
     for (with, without, band) in per_x {
@@ -184,6 +186,8 @@ pub(super) fn score(
             let without = no_discrepancy_strain(model, cal, x)?;
             Ok((x, truth_f, before, after, with, without))
         })
+        .collect::<Vec<_>>() // every condition first: an error is then the first in their order
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let (mut dn_b, mut dn_a, mut dt_b, mut dt_a) = (vec![], vec![], vec![], vec![]);
     let (mut ds_w, mut ds_wo) = (vec![], vec![]);
