@@ -266,17 +266,6 @@ fn count_lockages(history: &LoadHistory) -> f64 {
 /// enter the counters in order: 64 rows of 400 draws hold about 3e6 line loads.
 const ROWS_PER_CHUNK: usize = 64;
 
-/// The prior mean of the gap (8-point quadrature of the prior; in), the nominal model's `θ`.
-fn prior_mean_theta(model: &GateMultiLevel) -> Result<f64> {
-    let rule = model.prior.quadrature(8)?;
-    Ok(rule
-        .nodes
-        .iter()
-        .zip(&rule.weights)
-        .map(|(t, w)| t[0] * w)
-        .sum())
-}
-
 /// Damage over the record scaled to 1,000 lockages (zero without lockages).
 fn per_1000_lockages(damage: Vec<f64>, lockages: f64) -> Vec<f64> {
     damage
@@ -313,7 +302,8 @@ pub fn record_fatigue(
     let mut after: Vec<PointCounters> = (0..opts.n_draws).map(|_| PointCounters::new(n)).collect();
     let mut before = PointCounters::new(n);
     let mut true_counters = truth.map(|_| PointCounters::new(n));
-    let nominal_theta = [prior_mean_theta(model)?];
+    // the nominal model's gap: the prior mean (in), by the same rule as its response
+    let nominal_theta = model.prior.quadrature(8)?.mean();
     // the draws and the nominal response of a chunk of rows in parallel (contact solves,
     // most of the time), then pushed in the record's order (the rainflow counts need it)
     for (chunk_index, chunk) in history.x.chunks(ROWS_PER_CHUNK).enumerate() {
@@ -325,6 +315,8 @@ pub fn record_fatigue(
                     prior_mean_response(model, x)?,
                 ))
             })
+            .collect::<Vec<_>>() // every row first: an error is then the first in their order
+            .into_iter()
             .collect::<Result<Vec<_>>>()?;
         for (i, (x, (draws, nominal))) in chunk.iter().zip(rows).enumerate() {
             for (k, d) in draws.iter().enumerate() {

@@ -223,6 +223,29 @@ pub struct QuadratureRule {
     pub weights: Vec<f64>,
 }
 
+impl QuadratureRule {
+    /// The rule's mean of `θ`, `Σ_j w_j θ_j` per dimension (empty for a rule without nodes),
+    /// summed in node order.
+    ///
+    /// ```
+    /// let q = mlmodel::QuadratureRule {
+    ///     nodes: vec![vec![1.0, 10.0], vec![3.0, 20.0]],
+    ///     weights: vec![0.25, 0.75],
+    /// };
+    /// assert_eq!(q.mean(), vec![2.5, 17.5]);
+    /// ```
+    pub fn mean(&self) -> Vec<f64> {
+        let dim = self.nodes.first().map_or(0, Vec::len);
+        let mut m = vec![0.0; dim];
+        for (t, w) in self.nodes.iter().zip(&self.weights) {
+            for (mi, ti) in m.iter_mut().zip(t) {
+                *mi += w * ti;
+            }
+        }
+        m
+    }
+}
+
 /// The prior `f_Θ(θ)` of the unknown parameters.
 pub trait Prior: Send + Sync {
     /// Dimension of `θ`.

@@ -43,18 +43,6 @@ pub fn theta_rule(
     }
 }
 
-/// Mean of `θ` under a rule.
-pub(crate) fn rule_mean(rule: &QuadratureRule) -> Vec<f64> {
-    let dim = rule.nodes.first().map_or(0, Vec::len);
-    let mut m = vec![0.0; dim];
-    for (t, w) in rule.nodes.iter().zip(&rule.weights) {
-        for (mi, ti) in m.iter_mut().zip(t) {
-            *mi += w * ti;
-        }
-    }
-    m
-}
-
 /// The matrices of a linear observable model that Modules 2-4 reuse.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LinearParts {
@@ -154,9 +142,7 @@ where
             *bb += w * oi;
         }
     }
-    model
-        .unobservable
-        .evaluate(x, &rule_mean(theta_rule), &mut g)?;
+    model.unobservable.evaluate(x, &theta_rule.mean(), &mut g)?;
     let half = alpha_half_width(model, &g, sampling)?;
     Ok(XContext {
         mean_ag: (&parts.a * gbar).iter().copied().collect(),
@@ -390,7 +376,7 @@ where
     let mut nominal = vec![0.0; n_u];
     model
         .unobservable
-        .evaluate(x, &rule_mean(theta_rule), &mut nominal)?;
+        .evaluate(x, &theta_rule.mean(), &mut nominal)?;
     let half = alpha_half_width(model, &nominal, rule)?;
     let mut rng = StdRng::seed_from_u64(seed);
     let (mut delta, mut yu, mut go) = (vec![0.0; n_u], vec![0.0; n_u], vec![0.0; n_o]);

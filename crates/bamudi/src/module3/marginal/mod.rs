@@ -1381,16 +1381,6 @@ mod tests {
         }
     }
 
-    /// Module 4's coefficient mean at the experiments reproduces the in-sample fit: at every
-    /// experiment `x_i`, `B α̂(x_i)` equals the smoother `s W Wᵀ V⁻¹ r` at its rows, where
-    /// the smoother is `r − σ² V⁻¹ r`. The setting is the one that put an hourly FE-gate
-    /// record's predictions 3e4 µε off (12 coefficients seen by 7 gauges through a `B` with
-    /// weak directions, smooth priors, coefficient prior sd 2.5e6 lbf/in, 1 µε noise: `t λ_max`
-    /// about 1e13), where the coefficients' means are large and cancel in `B α`. Bound:
-    /// 1e-6 of the data's size (the two routes share the spectrum and differ by rounding
-    /// amplified by that cancellation: 4.6e-9 measured when written). The former route,
-    /// `s C (V⁻¹ r)` with Woodbury's subtraction, is computed beside it to show the check's
-    /// power: it missed by 66 times the data's size when written (asserted: above 1e-3).
     /// `B α̂` by the route Module 4 took before: `α̂_k = s Σ_i C_k(x, x_i) b_kᵀ (V⁻¹ r)_i` with
     /// `V⁻¹ r` given (Woodbury's).
     fn former_route_outputs(
@@ -1411,6 +1401,16 @@ mod tests {
         b * alpha
     }
 
+    /// Module 4's coefficient mean at the experiments reproduces the in-sample fit: at every
+    /// experiment `x_i`, `B α̂(x_i)` equals the smoother `s W Wᵀ V⁻¹ r` at its rows, where
+    /// the smoother is `r − σ² V⁻¹ r`. The setting is the one that put an hourly FE-gate
+    /// record's predictions 3e4 µε off (12 coefficients seen by 7 gauges through a `B` with
+    /// weak directions, smooth priors, coefficient prior sd 2.5e6 lbf/in, 1 µε noise: `t λ_max`
+    /// about 1e13), where the coefficients' means are large and cancel in `B α`. Bound:
+    /// 1e-6 of the data's size (the two routes share the spectrum and differ by rounding
+    /// amplified by that cancellation: 4.6e-9 measured when written). The former route,
+    /// `s C (V⁻¹ r)` with Woodbury's subtraction, is computed beside it to show the check's
+    /// power: it missed by 66 times the data's size when written (asserted: above 1e-3).
     #[test]
     fn module4_coefficient_mean_reproduces_the_fit_at_the_experiments() {
         let (n_e, n_o, n_k) = (80, 7, 12);
