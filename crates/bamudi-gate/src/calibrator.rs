@@ -18,7 +18,9 @@
 //! * the estimator of Eq. 29 is the exact linear-Gaussian conditional mean
 //!   ([`EstimatorParams::ExactLinear`]): no training set, and for the gate (linear observable
 //!   model) it is the estimator the learnt ones approximate ([`GateCalibrator::config`]);
-//! * the contact forces are memoised per exact `(h_up, h_down, θ)` ([`mlmodel::Memo`]);
+//! * the model rows `A g` and `b` that Modules 3 and 4 read are memoised per exact
+//!   `(h_up, h_down, θ)` ([`mlmodel::RowMemo`], 1,000,000 rows), and the contact forces
+//!   themselves for the rest ([`mlmodel::Memo`], 150,000 solves);
 //! * a calibration uses at most `max_experiments` rows (default 240), evenly spaced in time
 //!   over the calibration window; rows with the gate open are left out (no quoin force, and
 //!   Module 2's sampling rule is undefined where the nominal response is zero);
@@ -53,6 +55,15 @@ use std::sync::Arc;
 /// of a Gaussian posterior's variance and keep its mean exactly; see [`SupportPolicy`]).
 const LOOP_SUPPORT_NODES: usize = 16;
 
+/// Most contact solves the close loop's model remembers (about 8 kB each at 509 points, 1.2
+/// GB in all). Module 3 and 4 read the solves through the model-row memo
+/// ([`ROW_MEMO_CAPACITY`](crate::gate::ROW_MEMO_CAPACITY)); these are for the rest (the
+/// exact estimator's prior nodes at each calibration row, the force predictions). Measured
+/// on the thermal and wall-flexure records of docs/closeloop.md (24-in mesh): 400,000
+/// solves before the row memo, 3.5 GB peak; with the row memo 150,000 keep the time and
+/// take 1.7 GB; 50,000 took 4 % longer (0.9 GB).
+const LOOP_CONTACT_MEMO: usize = 150_000;
+
 /// BA-MUDI as the close loop's [`Calibrator`] of the miter gate. See the module docs.
 pub struct GateCalibrator {
     model: Arc<GateMultiLevel>,
@@ -71,7 +82,8 @@ impl GateCalibrator {
         let spec = MultiLevelSpec {
             gap_prior_in: prior_in,
             discrepancy_terms: [6, 6],
-            memo_capacity: 400_000,
+            memo_capacity: LOOP_CONTACT_MEMO,
+            row_memo_capacity: crate::gate::ROW_MEMO_CAPACITY,
         };
         let config = CalibrationParams::default()
             .estimator(EstimatorParams::ExactLinear)

@@ -13,6 +13,15 @@ use std::path::Path;
 /// The unit of the gate's outputs.
 pub const GAUGE_UNIT: &str = "microstrain";
 
+/// Most model rows (`A g` and `b` at one `(x, θ)`, [`mlmodel::RowMemo`]) the application's
+/// models remember: a row of the 7 gauges takes about 200 bytes with its key and table entry,
+/// so a full memo holds about 200 MB, where as many remembered contact solves (8 kB each at
+/// 509 points) would take 8 GB. Module 3 and Module 4 read the contact solves only through
+/// these rows, so the rows a calibration meets again (another coefficient mode on the same
+/// experiments and `θ` nodes, a close loop's recalibrations on overlapping windows,
+/// predictions at support points met before) are not solved again.
+pub const ROW_MEMO_CAPACITY: usize = 1_000_000;
+
 /// Builds and condenses the gate of `cfg` (Module 1) with its contact model, timed.
 pub fn build(cfg: &GateConfig) -> Result<(ContactModel, GateSummary, f64)> {
     let start = std::time::Instant::now();
@@ -62,7 +71,8 @@ impl SavedModel {
         })
     }
 
-    /// The multi-level model (contact forces memoised, `memo_capacity` entries) with the
+    /// The multi-level model (contact forces memoised, `memo_capacity` entries; model rows,
+    /// [`ROW_MEMO_CAPACITY`]) with the
     /// declared tolerances the calibration integrated, rebuilt one sd either side, so that
     /// Module 4 predicts with them.
     pub fn multilevel(&self, memo_capacity: usize) -> Result<GateMultiLevel> {
@@ -80,6 +90,7 @@ impl SavedModel {
             gap_prior_in: self.gap_prior,
             discrepancy_terms: self.discrepancy_terms,
             memo_capacity,
+            row_memo_capacity: ROW_MEMO_CAPACITY,
         };
         let model = mitergate::multilevel(self.contact.clone(), &spec)?;
         if specs.is_empty() {

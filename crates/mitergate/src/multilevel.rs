@@ -280,8 +280,14 @@ pub struct MultiLevelSpec {
     /// Legendre discrepancy terms `[normal, tangential]` (degrees `0..k`), each `>= 1`;
     /// [`multilevel`] caps them at the number of representation points.
     pub discrepancy_terms: [usize; 2],
-    /// Most remembered contact solves ([`mlmodel::Memo`]); `0`: no memo.
+    /// Most remembered contact solves ([`mlmodel::Memo`], 8 bytes per force value: about 8
+    /// kB per solve at 509 points); `0`: no memo.
     pub memo_capacity: usize,
+    /// Most remembered model rows `A g` and `b` ([`mlmodel::RowMemo`], 14 values per row for
+    /// the 7 gauges): what Module 3 and Module 4 read of the contact solves, kept at a
+    /// sixtieth of a solve's memory; `0`: no memo.
+    #[serde(default)]
+    pub row_memo_capacity: usize,
 }
 
 impl Default for MultiLevelSpec {
@@ -292,6 +298,7 @@ impl Default for MultiLevelSpec {
             gap_prior_in: (81.0, 105.0),
             discrepancy_terms: [6, 6],
             memo_capacity: 0,
+            row_memo_capacity: 0,
         }
     }
 }
@@ -327,6 +334,17 @@ impl MultiLevelSpec {
     /// ```
     pub fn with_memo_capacity(mut self, capacity: usize) -> Self {
         self.memo_capacity = capacity;
+        self
+    }
+
+    /// Sets the model-row memo capacity (`0`: no memo).
+    ///
+    /// ```
+    /// let s = mitergate::MultiLevelSpec::default().with_row_memo_capacity(1_000_000);
+    /// assert_eq!(s.row_memo_capacity, 1_000_000);
+    /// ```
+    pub fn with_row_memo_capacity(mut self, capacity: usize) -> Self {
+        self.row_memo_capacity = capacity;
         self
     }
 
@@ -401,7 +419,7 @@ pub fn build_contact(cfg: &GateConfig) -> Result<(ContactModel, GateSummary), Ga
 }
 
 /// The gate's multi-level model of `contact` and `spec`: [`ContactForceModel`] memoised with
-/// `spec.memo_capacity`, [`StrainModel`], the uniform gap prior `spec.gap_prior_in` and a
+/// `spec.memo_capacity` (and its model rows with `spec.row_memo_capacity`), [`StrainModel`], the uniform gap prior `spec.gap_prior_in` and a
 /// Legendre discrepancy basis on `[0, H]` at the gate's representation points.
 ///
 /// The discrepancy terms are capped at the number of representation points `N_u`
@@ -452,10 +470,8 @@ pub fn multilevel(
     let strain = StrainModel::new(gate);
     let prior = UniformPrior::new(vec![spec.gap_prior_in])?;
     let forces = Memo::new(ContactForceModel::new(contact), spec.memo_capacity);
-    Ok(MultiLevelModel::new(
-        forces,
-        strain,
-        Box::new(prior),
-        basis,
-    )?)
+    Ok(
+        MultiLevelModel::new(forces, strain, Box::new(prior), basis)?
+            .with_row_memo(spec.row_memo_capacity),
+    )
 }

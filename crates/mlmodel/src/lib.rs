@@ -31,7 +31,7 @@ pub struct ReadmeDoctest;
 
 mod memo;
 
-pub use memo::Memo;
+pub use memo::{Memo, RowMemo};
 
 use nalgebra::DMatrix;
 use numerics::random::standard_normal;
@@ -589,6 +589,9 @@ pub struct MultiLevelModel<U, O> {
     /// Declared tolerances of the system's build (none by default; see
     /// [`with_tolerances`](Self::with_tolerances)).
     pub tolerances: Vec<BuildTolerance<U, O>>,
+    /// Remembered rows of [`model_row`](Self::model_row) (none by default; see
+    /// [`with_row_memo`](Self::with_row_memo)).
+    rows: RowMemo,
 }
 
 /// One uncertain build parameter of the modelled system (a plate thickness, a modulus, a
@@ -643,7 +646,20 @@ impl<U: UnobservableModel, O: ObservableModel> MultiLevelModel<U, O> {
             prior,
             basis,
             tolerances: Vec::new(),
+            rows: RowMemo::default(),
         })
+    }
+
+    /// Remembers up to `capacity` rows of [`model_row`](Self::model_row) (0: none), replacing
+    /// any rows remembered so far.
+    pub fn with_row_memo(mut self, capacity: usize) -> Self {
+        self.rows = RowMemo::new(capacity);
+        self
+    }
+
+    /// The memo of [`model_row`](Self::model_row).
+    pub fn row_memo(&self) -> &RowMemo {
+        &self.rows
     }
 
     /// Declares tolerances of the system's build; each observable model must have the
@@ -723,5 +739,63 @@ impl<U: UnobservableModel, O: ObservableModel> MultiLevelModel<U, O> {
             *o = rho * *o + d;
         }
         Ok(())
+    }
+}
+
+impl<U: UnobservableModel, O: LinearObservableModel> MultiLevelModel<U, O> {
+    /// The model's row of the calibration mean (Eq. 50, with `ρ = 1` and no discrepancy) at
+    /// `(x, θ)`: `A g_u(x, θ)` (the first `N_o` values) and the offset `b(x, θ)` (the last
+    /// `N_o`), output units. Remembered when the model has a [row memo](Self::with_row_memo):
+    /// the values are those computed the first time, bit for bit (both models are
+    /// deterministic), so the memo changes no result.
+    ///
+    /// ```
+    /// # use mlmodel::*;
+    /// # use nalgebra::DMatrix;
+    /// # struct Line;
+    /// # impl UnobservableModel for Line {
+    /// #     fn input_names(&self) -> Vec<String> { vec!["x".into()] }
+    /// #     fn param_dim(&self) -> usize { 1 }
+    /// #     fn components(&self) -> usize { 1 }
+    /// #     fn coordinates(&self) -> &[f64] { &[0.0, 1.0] }
+    /// #     fn evaluate(&self, x: &[f64], t: &[f64], out: &mut [f64]) -> Result<()> {
+    /// #         out.copy_from_slice(&[x[0] * t[0], x[0]]); Ok(())
+    /// #     }
+    /// # }
+    /// // one gauge reading the sum of the response, offset by 0.5
+    /// struct Sum(DMatrix<f64>);
+    /// impl ObservableModel for Sum {
+    ///     fn output_names(&self) -> Vec<String> { vec!["sg".into()] }
+    ///     fn evaluate(&self, _: &[f64], _: &[f64], y: &[f64], out: &mut [f64]) -> Result<()> {
+    ///         out[0] = y.iter().sum::<f64>() + 0.5;
+    ///         Ok(())
+    ///     }
+    /// }
+    /// impl LinearObservableModel for Sum {
+    ///     fn matrix(&self) -> &DMatrix<f64> { &self.0 }
+    ///     fn offset(&self, _: &[f64], _: &[f64], out: &mut [f64]) -> Result<()> {
+    ///         out[0] = 0.5;
+    ///         Ok(())
+    ///     }
+    /// }
+    /// # let basis = DiscrepancyBasis::new(orthopoly::Family::Legendre, (0.0, 1.0), &[0.0, 1.0], &[1]).unwrap();
+    /// # let prior = Box::new(UniformPrior::new(vec![(0.0, 3.0)]).unwrap());
+    /// let model = MultiLevelModel::new(Line, Sum(DMatrix::from_element(1, 2, 1.0)), prior, basis)
+    ///     .unwrap()
+    ///     .with_row_memo(100);
+    /// let row = model.model_row(&[2.0], &[1.5]).unwrap();
+    /// assert_eq!(&row[..], &[5.0, 0.5]); // A g = 2 * 1.5 + 2, b = 0.5
+    /// assert_eq!(model.row_memo().len(), 1);
+    /// ```
+    pub fn model_row(&self, x: &[f64], theta: &[f64]) -> Result<std::sync::Arc<[f64]>> {
+        let a = self.observable.matrix();
+        let n_o = a.nrows();
+        self.rows.row(x, theta, 2 * n_o, |out| {
+            let mut g = vec![0.0; self.unobservable.response_len()];
+            self.unobservable.evaluate(x, theta, &mut g)?;
+            let ag = a * nalgebra::DVector::from_vec(g);
+            out[..n_o].copy_from_slice(ag.as_slice());
+            self.observable.offset(x, theta, &mut out[n_o..])
+        })
     }
 }

@@ -35,8 +35,57 @@ use std::sync::{Arc, RwLock};
 #[derive(Debug)]
 pub struct Memo<U> {
     inner: U,
-    memo: RwLock<HashMap<Vec<u64>, Arc<[f64]>>>,
+    store: Store,
+}
+
+/// Values remembered by the exact bits of their inputs; cleared (logged at `info` with
+/// `what`) when it holds `capacity` entries, and a pass-through at `capacity = 0`. The memos
+/// of this crate share it.
+#[derive(Debug)]
+pub(crate) struct Store {
+    map: RwLock<HashMap<Vec<u64>, Arc<[f64]>>>,
     capacity: usize,
+    what: &'static str,
+}
+
+impl Store {
+    pub(crate) fn new(capacity: usize, what: &'static str) -> Self {
+        Self {
+            map: RwLock::new(HashMap::new()),
+            capacity,
+            what,
+        }
+    }
+
+    pub(crate) fn capacity(&self) -> usize {
+        self.capacity
+    }
+
+    pub(crate) fn len(&self) -> usize {
+        self.map.read().map_or(0, |m| m.len())
+    }
+
+    /// The key of `(x, θ)`: the exact bits of both.
+    pub(crate) fn key(x: &[f64], theta: &[f64]) -> Vec<u64> {
+        x.iter().chain(theta).map(|v| v.to_bits()).collect()
+    }
+
+    pub(crate) fn get(&self, key: &[u64]) -> Option<Arc<[f64]>> {
+        self.map.read().ok().and_then(|m| m.get(key).cloned())
+    }
+
+    pub(crate) fn remember(&self, key: Vec<u64>, values: &[f64]) {
+        if self.capacity == 0 {
+            return;
+        }
+        if let Ok(mut m) = self.map.write() {
+            if m.len() >= self.capacity {
+                log::info!("{} full ({} entries): cleared", self.what, m.len());
+                m.clear();
+            }
+            m.insert(key, Arc::from(values));
+        }
+    }
 }
 
 impl<U: UnobservableModel> Memo<U> {
@@ -44,8 +93,7 @@ impl<U: UnobservableModel> Memo<U> {
     pub fn new(inner: U, capacity: usize) -> Self {
         Self {
             inner,
-            memo: RwLock::new(HashMap::new()),
-            capacity,
+            store: Store::new(capacity, "model memo"),
         }
     }
 
@@ -56,31 +104,17 @@ impl<U: UnobservableModel> Memo<U> {
 
     /// The largest number of remembered evaluations.
     pub fn capacity(&self) -> usize {
-        self.capacity
+        self.store.capacity()
     }
 
     /// Number of remembered evaluations.
     pub fn len(&self) -> usize {
-        self.memo.read().map_or(0, |m| m.len())
+        self.store.len()
     }
 
     /// Whether nothing is remembered.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
-    }
-
-    fn key(x: &[f64], theta: &[f64]) -> Vec<u64> {
-        x.iter().chain(theta).map(|v| v.to_bits()).collect()
-    }
-
-    fn remember(&self, key: Vec<u64>, out: &[f64]) {
-        if let Ok(mut m) = self.memo.write() {
-            if m.len() >= self.capacity {
-                log::info!("model memo full ({} entries): cleared", m.len());
-                m.clear();
-            }
-            m.insert(key, Arc::from(out));
-        }
     }
 }
 
@@ -107,19 +141,83 @@ impl<U: UnobservableModel> UnobservableModel for Memo<U> {
         self.inner.discrepancy_support(theta)
     }
     fn evaluate(&self, x: &[f64], theta: &[f64], out: &mut [f64]) -> Result<()> {
-        if self.capacity == 0 {
+        if self.store.capacity() == 0 {
             return self.inner.evaluate(x, theta, out);
         }
-        let key = Self::key(x, theta);
-        let hit = self.memo.read().ok().and_then(|m| m.get(&key).cloned());
-        if let Some(v) = hit
+        let key = Store::key(x, theta);
+        if let Some(v) = self.store.get(&key)
             && v.len() == out.len()
         {
             out.copy_from_slice(&v);
             return Ok(());
         }
         self.inner.evaluate(x, theta, out)?;
-        self.remember(key, out);
+        self.store.remember(key, out);
         Ok(())
+    }
+}
+
+/// The rows `A g_u(x, θ)` and `b(x, θ)` of a multi-level model with a linear observable
+/// model, remembered by the exact bits of `(x, θ)` (see
+/// [`MultiLevelModel::model_row`](crate::MultiLevelModel::model_row)). A row holds `2 N_o`
+/// values where the unobservable response it comes from holds `C N_u` (14 against 1018 for
+/// the miter gate), so a calibration's repeated rows (the same experiments at the same `θ`
+/// nodes in another coefficient mode, or predictions at support points met before) can be
+/// kept for a few hundred bytes each. When it holds `capacity` rows it is cleared (logged at
+/// `info`); `capacity = 0` (the default) remembers nothing.
+#[derive(Debug)]
+pub struct RowMemo {
+    store: Store,
+}
+
+impl Default for RowMemo {
+    fn default() -> Self {
+        Self::new(0)
+    }
+}
+
+impl RowMemo {
+    /// A memo of at most `capacity` rows (0: none).
+    pub fn new(capacity: usize) -> Self {
+        Self {
+            store: Store::new(capacity, "model-row memo"),
+        }
+    }
+
+    /// The largest number of remembered rows.
+    pub fn capacity(&self) -> usize {
+        self.store.capacity()
+    }
+
+    /// Number of remembered rows.
+    pub fn len(&self) -> usize {
+        self.store.len()
+    }
+
+    /// Whether nothing is remembered.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The row `[A g; b]` at `(x, θ)`: remembered, or computed by `compute` (into a buffer
+    /// of `len` values) and remembered.
+    pub(crate) fn row(
+        &self,
+        x: &[f64],
+        theta: &[f64],
+        len: usize,
+        compute: impl FnOnce(&mut [f64]) -> crate::Result<()>,
+    ) -> crate::Result<Arc<[f64]>> {
+        let key = Store::key(x, theta);
+        if let Some(v) = self.store.get(&key)
+            && v.len() == len
+        {
+            return Ok(v);
+        }
+        let mut out = vec![0.0; len];
+        compute(&mut out)?;
+        let row: Arc<[f64]> = Arc::from(out);
+        self.store.remember(key, &row);
+        Ok(row)
     }
 }

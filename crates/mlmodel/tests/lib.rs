@@ -150,3 +150,38 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    /// The row memo changes no number: with a memo so small that it is cleared over and over
+    /// (3 rows) and with none, every `model_row` of a sequence that revisits inputs equals
+    /// `[A g; b]` computed directly, bit for bit, and the memo never holds more than its
+    /// capacity. A stale row returned for another `θ` or `x` would differ (the beam's response
+    /// moves with both).
+    #[test]
+    fn row_memo_returns_the_rows_it_would_compute(
+        picks in proptest::collection::vec(0usize..5, 1..40),
+    ) {
+        let inputs = [
+            ([5000.0, 40.0], 12.0),
+            ([5000.0, 40.0], 12.5),
+            ([3000.0, 10.0], 12.0),
+            ([3000.0, 10.0], 30.0),
+            ([100.0, 80.0], 5.0),
+        ];
+        let plain = beam_model((0.0, 60.0), 4);
+        let memo = beam_model((0.0, 60.0), 4).with_row_memo(3);
+        for &k in &picks {
+            let (x, theta) = inputs[k];
+            let mut g = vec![0.0; plain.unobservable.response_len()];
+            plain.unobservable.evaluate(&x, &[theta], &mut g).unwrap();
+            let ag = plain.observable.matrix() * nalgebra::DVector::from_vec(g);
+            let mut b = vec![0.0; ag.len()];
+            plain.observable.offset(&x, &[theta], &mut b).unwrap();
+            let direct: Vec<f64> = ag.iter().chain(&b).copied().collect();
+            prop_assert_eq!(&plain.model_row(&x, &[theta]).unwrap()[..], &direct[..]);
+            prop_assert_eq!(&memo.model_row(&x, &[theta]).unwrap()[..], &direct[..]);
+            prop_assert!(memo.row_memo().len() <= 3);
+        }
+        prop_assert!(plain.row_memo().is_empty());
+    }
+}

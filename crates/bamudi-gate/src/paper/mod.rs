@@ -29,6 +29,7 @@ mod sensitivity;
 pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rules};
 
 use crate::error::Result;
+use crate::gate::ROW_MEMO_CAPACITY;
 use bamudi::closeloop::ThetaSummary;
 use bamudi::module2::accuracy::{EstimatorAccuracy, estimator_accuracy};
 use bamudi::{
@@ -319,13 +320,17 @@ pub fn build_gate(element_size: Option<f64>) -> Result<(ContactModel, GateSummar
     Ok((contact, summary))
 }
 
-/// The gate as a multi-level model with prior `U(lo, hi)` and 6 + 6 Legendre terms (no memo:
-/// every contact solve of the reproduction is at a distinct input).
+/// The gate as a multi-level model with prior `U(lo, hi)` and 6 + 6 Legendre terms. Its
+/// model rows are remembered ([`ROW_MEMO_CAPACITY`]): the coefficient modes of a scenario, its
+/// scores and the sensitivity study's rules meet the same experiments at the same `θ` nodes.
+/// Its contact solves are not (a memo of 8-kB solves took the run's peak memory from 0.93 to
+/// 2.72 GB; docs/benchmarks.md).
 pub fn gate_model(contact: &ContactModel, prior: (f64, f64)) -> Result<GateMultiLevel> {
     let spec = MultiLevelSpec {
         gap_prior_in: prior,
         discrepancy_terms: [6, 6],
         memo_capacity: 0,
+        row_memo_capacity: ROW_MEMO_CAPACITY,
     };
     Ok(mitergate::multilevel(contact.clone(), &spec)?)
 }
@@ -481,7 +486,7 @@ pub fn run_scenario(
         None => (None, None),
     };
     let sens = match opts.sensitivity {
-        true => sensitivity::study(contact, s.scenario.prior, &s.exps, opts)?,
+        true => sensitivity::study(contact, &s.model, s.scenario.prior, &s.exps, opts)?,
         false => Vec::new(),
     };
     let accuracy = estimator_accuracy(

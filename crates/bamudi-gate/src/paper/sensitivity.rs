@@ -5,7 +5,7 @@ use crate::error::Result;
 use bamudi::{
     CalibrationParams, CoefficientMode, EstimatorParams, Experiments, SamplingRule, calibrate,
 };
-use mitergate::ContactModel;
+use mitergate::{ContactModel, GateMultiLevel};
 
 /// Experiments used per rule in the sensitivity study.
 pub const SENSITIVITY_EXPERIMENTS: usize = 150;
@@ -46,13 +46,16 @@ fn sensitivity_params(opts: &ReproduceOptions, rule: SamplingRule) -> Calibratio
 
 /// The sensitivity study: Modules 2-3 with the exact estimator under other sampling rules
 /// and with the prior window shifted.
+///
+/// `model` is the scenario's (prior `prior`): the rules and the unshifted window calibrate it,
+/// so that they read the model rows its other calibrations remembered.
 pub(super) fn study(
     contact: &ContactModel,
+    model: &GateMultiLevel,
     prior: (f64, f64),
     exps: &Experiments,
     opts: &ReproduceOptions,
 ) -> Result<Vec<SensitivityRow>> {
-    let model = &gate_model(contact, prior)?;
     // Each rule re-runs Modules 2-3; to keep the study affordable it uses the first
     // `SENSITIVITY_EXPERIMENTS` experiments and a coarser θ grid (stated in the report).
     let n = exps.len().min(SENSITIVITY_EXPERIMENTS);
@@ -79,7 +82,14 @@ pub(super) fn study(
     let quarter = 0.25 * (prior.1 - prior.0);
     for shift in [0.0, -quarter, quarter] {
         let shifted = (prior.0 + shift, prior.1 + shift);
-        let model = gate_model(contact, shifted)?;
+        let shifted_model;
+        let model = match shift == 0.0 {
+            true => model,
+            false => {
+                shifted_model = gate_model(contact, shifted)?;
+                &shifted_model
+            }
+        };
         for mode in [
             CoefficientMode::PriorMarginal,
             CoefficientMode::ConditionalOnTheta,
@@ -91,7 +101,7 @@ pub(super) fn study(
             let cfg = sensitivity_params(opts, rule.clone())
                 .coefficients(mode)
                 .check()?;
-            let cal = calibrate(&model, &sub, &cfg)?;
+            let cal = calibrate(model, &sub, &cfg)?;
             let what = match mode {
                 CoefficientMode::Marginal => "marginal coefficients",
                 CoefficientMode::PriorMarginal => "paper's Module 3",

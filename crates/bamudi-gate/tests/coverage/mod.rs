@@ -237,6 +237,7 @@ impl AsBuiltSkin {
             gap_prior_in: (81.0, 105.0),
             discrepancy_terms: [6, 6],
             memo_capacity: 100_000,
+            row_memo_capacity: 0,
         };
         let undeclared = mitergate::multilevel(contact.clone(), &spec).unwrap();
         let tolerance = ToleranceSpec {

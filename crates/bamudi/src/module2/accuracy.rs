@@ -53,16 +53,32 @@ where
         seed,
     };
     let set = generate_linear(model, parts, &spec, &Silent)?;
+    let x_row = |i: usize| -> Vec<f64> { set.x.row(i).iter().copied().collect() };
+    // The samples of one pool input are consecutive rows with the same `x`: its context
+    // (`n_nodes + 1` model evaluations) is computed once for all of them.
+    let firsts: Vec<usize> = (0..set.len())
+        .filter(|&i| i == 0 || set.x.row(i) != set.x.row(i - 1))
+        .collect();
+    let contexts = firsts
+        .par_iter()
+        .map(|&i| x_context(model, parts, &m2.theta_rule, &cfg.sampling, &x_row(i)))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect::<Result<Vec<_>>>()?;
     let predicted = (0..set.len())
         .into_par_iter()
         .map(|i| {
-            let x: Vec<f64> = set.x.row(i).iter().copied().collect();
-            let ctx = x_context(model, parts, &m2.theta_rule, &cfg.sampling, &x)?;
+            let ctx = &contexts[firsts.partition_point(|&f| f <= i) - 1];
+            let x = x_row(i);
             let xm = DMatrix::from_row_slice(1, x.len(), &x);
             let ym = DMatrix::from_fn(1, set.mu_o.ncols(), |_, q| set.mu_o[(i, q)]);
-            let a = m2.estimator.predict(set.rho[i], &xm, &ym, &[ctx])?;
+            let a = m2
+                .estimator
+                .predict(set.rho[i], &xm, &ym, std::slice::from_ref(ctx))?;
             Ok(a.row(0).iter().copied().collect::<Vec<f64>>())
         })
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let k = set.alpha.ncols();
     let (mut r2, mut rel) = (Vec::with_capacity(k), Vec::with_capacity(k));

@@ -166,19 +166,12 @@ where
     let (n_e, n_o) = (p.exps.len(), p.exps.y.ncols());
     let per_row = (0..n_e)
         .into_par_iter()
-        .map(|i| {
-            let x = p.x_row(i);
-            let mut g = vec![0.0; p.model.unobservable.response_len()];
-            let mut b = vec![0.0; n_o];
-            p.model.unobservable.evaluate(&x, theta, &mut g)?;
-            p.model.observable.offset(&x, theta, &mut b)?;
-            Ok((&p.parts.a * nalgebra::DVector::from_vec(g), b))
-        })
-        .collect::<Result<Vec<_>>>()?;
+        .map(|i| p.model.model_row(&p.x_row(i), theta))
+        .collect::<mlmodel::Result<Vec<_>>>()?;
     Ok(ModelRows {
         theta: theta.to_vec(),
-        ag: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i].0[q]),
-        b: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i].1[q]),
+        ag: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i][q]),
+        b: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i][n_o + q]),
     })
 }
 

@@ -308,14 +308,11 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     /// `A g_u(x, θ)` and `b(x, θ)` (output units).
     fn model_parts(&self, x: &[f64], theta: &[f64]) -> Result<(DVector<f64>, DVector<f64>)> {
-        let parts = self.cal.parts();
-        let mut g = vec![0.0; parts.l.nrows()];
-        let mut off = vec![0.0; parts.b.nrows()];
-        self.model.unobservable.evaluate(x, theta, &mut g)?;
-        self.model.observable.offset(x, theta, &mut off)?;
+        let row = self.model.model_row(x, theta)?;
+        let n_o = row.len() / 2;
         Ok((
-            &parts.a * DVector::from_column_slice(&g),
-            DVector::from_vec(off),
+            DVector::from_column_slice(&row[..n_o]),
+            DVector::from_column_slice(&row[n_o..]),
         ))
     }
 
