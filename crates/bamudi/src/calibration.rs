@@ -197,6 +197,90 @@ impl<'a> Calibrate<'a> {
         self.finish(p, estimator, training_pool_size, Timings::default())
     }
 
+    /// Module 3 (and the adequacy checks) in this configuration's coefficient mode on Module 2
+    /// of `previous`, a calibration of the same model and data in another mode: the training
+    /// set, the estimator, `ρ*` (Eq. 30), `α̂` and the coefficient GPs are taken from it,
+    /// not recomputed — they do not depend on the coefficient mode, so the result is the one
+    /// [`run_with_estimator`](Self::run_with_estimator) gives with `previous`'s estimator, bit
+    /// for bit, without refitting the GPs. Errors if `previous` was fitted to another model
+    /// or other experiment inputs, or under another `θ` quadrature rule or input box (another
+    /// seed, prior or marginalisation), or another `ρ` search, sampling rule or GP setting.
+    ///
+    /// ```
+    /// # // a tiny two-level model: the response is θ at one point, the output reads it
+    /// # use bamudi::{CalibrationParams, EstimatorParams, Experiments};
+    /// # use mlmodel::*;
+    /// # use nalgebra::DMatrix;
+    /// # struct Lift;
+    /// # impl UnobservableModel for Lift {
+    /// #     fn input_names(&self) -> Vec<String> { vec!["x".into()] }
+    /// #     fn param_dim(&self) -> usize { 1 }
+    /// #     fn components(&self) -> usize { 1 }
+    /// #     fn coordinates(&self) -> &[f64] { &[0.0, 0.5, 1.0] }
+    /// #     fn evaluate(&self, x: &[f64], t: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
+    /// #         for (o, d) in out.iter_mut().zip([0.0, 0.5, 1.0]) { *o = x[0] * (t[0] + d); }
+    /// #         Ok(())
+    /// #     }
+    /// # }
+    /// # struct Read(DMatrix<f64>);
+    /// # impl ObservableModel for Read {
+    /// #     fn output_names(&self) -> Vec<String> { vec!["a".into(), "b".into()] }
+    /// #     fn evaluate(&self, x: &[f64], t: &[f64], y: &[f64], out: &mut [f64]) -> mlmodel::Result<()> {
+    /// #         self.offset(x, t, out)?;
+    /// #         for (o, v) in out.iter_mut().zip((&self.0 * nalgebra::DVector::from_column_slice(y)).iter()) { *o += v; }
+    /// #         Ok(())
+    /// #     }
+    /// # }
+    /// # impl LinearObservableModel for Read {
+    /// #     fn matrix(&self) -> &DMatrix<f64> { &self.0 }
+    /// #     fn offset(&self, _: &[f64], _: &[f64], out: &mut [f64]) -> mlmodel::Result<()> { out.fill(0.0); Ok(()) }
+    /// # }
+    /// # let basis = DiscrepancyBasis::new(orthopoly::Family::Legendre, (0.0, 1.0), &[0.0, 0.5, 1.0], &[1]).unwrap();
+    /// # let a = DMatrix::from_row_slice(2, 3, &[1.0, 0.0, 0.5, 0.0, 1.0, 0.5]);
+    /// # let model = MultiLevelModel::new(Lift, Read(a), Box::new(UniformPrior::new(vec![(0.0, 4.0)]).unwrap()), basis).unwrap();
+    /// # let x = DMatrix::from_fn(12, 1, |i, _| 1.0 + i as f64);
+    /// # let y = DMatrix::from_fn(12, 2, |i, p| (1.0 + i as f64) * (2.0 + [0.5, 1.0][p]) + 0.01 * ((i * 7 + p) % 5) as f64);
+    /// # let exps = Experiments::new(vec!["x".into()], vec!["a".into(), "b".into()], x, y).unwrap();
+    /// # use bamudi::{Calibrate, CoefficientMode};
+    /// let paper = CalibrationParams::default()
+    ///     .estimator(EstimatorParams::ExactLinear)
+    ///     .gp_restarts(0)
+    ///     .coefficients(CoefficientMode::PriorMarginal)
+    ///     .check()
+    ///     .unwrap();
+    /// let first = Calibrate::new(&paper).run(&model, &exps).unwrap();
+    /// let conditional = paper.clone().into_params()
+    ///     .coefficients(CoefficientMode::ConditionalOnTheta)
+    ///     .check()
+    ///     .unwrap();
+    /// let again = Calibrate::new(&conditional).rerun_module3(&model, &exps, &first).unwrap();
+    /// let estimator = first.module2().estimator.clone();
+    /// let refit = Calibrate::new(&conditional)
+    ///     .run_with_estimator(&model, &exps, estimator, 0)
+    ///     .unwrap();
+    /// assert_eq!(again.module3().posterior.mean(), refit.module3().posterior.mean());
+    /// // Module 2 under another seed is another Module 2
+    /// let reseeded = conditional.into_params().seed(9).check().unwrap();
+    /// let err = Calibrate::new(&reseeded).rerun_module3(&model, &exps, &first).unwrap_err();
+    /// assert!(err.to_string().contains("cannot be reused"));
+    /// ```
+    pub fn rerun_module3<U, O>(
+        &self,
+        model: &MultiLevelModel<U, O>,
+        exps: &Experiments,
+        previous: &Calibration,
+    ) -> Result<Calibration>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let p = Problem::new(model, exps, self.cfg, self.observer)?;
+        previous.check_module2_reuse(&p)?;
+        let mut t = Timings::default();
+        let ctx = self.stage(Stage::Rho, &mut t.rho_s, || module2::contexts(&p))?;
+        self.conclude(p, previous.module2.clone(), ctx, t)
+    }
+
     /// `ρ*`, `α̂`, the GPs (Module 2) and Module 3.
     fn finish<U, O>(
         &self,
@@ -226,6 +310,21 @@ impl<'a> Calibrate<'a> {
             alpha_hat,
             gps,
         };
+        self.conclude(p, m2, ctx, t)
+    }
+
+    /// Module 3 in the configured mode on Module 2's results, then the adequacy checks.
+    fn conclude<U, O>(
+        &self,
+        p: Problem<'_, U, O>,
+        m2: Module2,
+        ctx: Vec<module2::training::XContext>,
+        mut t: Timings,
+    ) -> Result<Calibration>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
         let m3 = match module3::method::<U, O>(self.cfg.coefficients) {
             Method::Modular(strategy) => {
                 let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
@@ -418,6 +517,33 @@ impl Calibration {
             .marginal_state
             .get_or_init(|| std::sync::Arc::new(state))
             .clone())
+    }
+
+    /// Checks that this calibration's Module 2 holds for `p` (the problem of another mode):
+    /// the same model, experiment inputs, `θ` rule, input box, and the configuration that
+    /// Module 2 reads (seed, `ρ` search, sampling rule, GP restarts).
+    fn check_module2_reuse<U, O>(&self, p: &Problem<'_, U, O>) -> Result<()>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        self.check_model(p.model)?;
+        let (a, b) = (&self.config, p.cfg);
+        let differs = [
+            ("experiment inputs", self.x_experiments != p.exps.x),
+            ("θ quadrature rule", self.module2.theta_rule != p.theta_rule),
+            ("input box", self.module2.x_bounds != p.x_bounds),
+            ("seed", a.seed != b.seed),
+            ("ρ search", a.rho != b.rho),
+            ("sampling rule", a.sampling != b.sampling),
+            ("GP restarts", a.gp_restarts != b.gp_restarts),
+        ];
+        match differs.iter().find(|(_, d)| *d) {
+            Some((what, _)) => Err(BamudiError::Calibration(format!(
+                "Module 2 of the earlier calibration cannot be reused: its {what} differs"
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// Checks that `model` is the one this calibration was fitted to.

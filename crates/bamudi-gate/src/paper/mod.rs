@@ -360,9 +360,9 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
         .seed(opts.seed)
 }
 
-/// Re-runs Modules 2b-3 of a finished calibration with another coefficient mode (same
-/// fitted estimator, same data) and scores it like the main run; returns the scores and the
-/// variant's calibration.
+/// Re-runs Module 3 of a finished calibration with another coefficient mode (same estimator,
+/// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::rerun_module3`]) and scores it
+/// like the main run; returns the scores and the variant's calibration.
 fn run_variant(
     s: &ScenarioRun<'_>,
     cal: &Calibration,
@@ -377,13 +377,9 @@ fn run_variant(
         .into_params()
         .coefficients(mode)
         .check()?;
-    let m2 = cal.module2();
-    let cond = Calibrate::new(&cfg).observer(observer).run_with_estimator(
-        &s.model,
-        &s.exps,
-        m2.estimator.clone(),
-        m2.training_pool_size,
-    )?;
+    let cond = Calibrate::new(&cfg)
+        .observer(observer)
+        .rerun_module3(&s.model, &s.exps, cal)?;
     let seconds = t.elapsed().as_secs_f64();
     let scores = score(&s.model, &cond, &s.scenario, s.contact, &s.new_x)?;
     let result = ConditionalResult {
