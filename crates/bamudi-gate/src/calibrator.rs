@@ -56,12 +56,12 @@ use std::sync::Arc;
 const LOOP_SUPPORT_NODES: usize = 16;
 
 /// Most contact solves the close loop's model remembers (about 8 kB each at 509 points, 1.2
-/// GB in all). Module 3 and 4 read the solves through the model-row memo
-/// ([`ROW_MEMO_CAPACITY`](crate::gate::ROW_MEMO_CAPACITY)); these are for the rest (the
-/// exact estimator's prior nodes at each calibration row, the force predictions). Measured
-/// on the thermal and wall-flexure records of docs/closeloop.md (24-in mesh): 400,000
-/// solves before the row memo, 3.5 GB peak; with the row memo 150,000 keep the time and
-/// take 1.7 GB; 50,000 took 4 % longer (0.9 GB).
+/// GB in all). Module 3's rows and Module 4's output moments read the solves through the
+/// model-row memo ([`ROW_MEMO_CAPACITY`](crate::gate::ROW_MEMO_CAPACITY)); these are for the
+/// rest (the exact estimator's prior nodes at each calibration row, the force predictions).
+/// Measured on the wall-flexure record of docs/closeloop.md (24-in mesh, with the row memo,
+/// 64-MB anchor cache): 400,000 solves 72.9 s and 3.50 GB peak, 150,000 72.4 s and 1.71 GB,
+/// 50,000 75.6 s and 0.89 GB (command wall times).
 const LOOP_CONTACT_MEMO: usize = 150_000;
 
 /// BA-MUDI as the close loop's [`Calibrator`] of the miter gate. See the module docs.

@@ -14,12 +14,15 @@ use std::path::Path;
 pub const GAUGE_UNIT: &str = "microstrain";
 
 /// Most model rows (`A g` and `b` at one `(x, θ)`, [`mlmodel::RowMemo`]) the application's
-/// models remember: a row of the 7 gauges takes about 200 bytes with its key and table entry,
-/// so a full memo holds about 200 MB, where as many remembered contact solves (8 kB each at
-/// 509 points) would take 8 GB. Module 3 and Module 4 read the contact solves only through
-/// these rows, so the rows a calibration meets again (another coefficient mode on the same
-/// experiments and `θ` nodes, a close loop's recalibrations on overlapping windows,
-/// predictions at support points met before) are not solved again.
+/// models remember: a row of the 7 gauges takes about 260 bytes with its key and hash-table
+/// slot, so a full memo holds about 260 MB, where as many remembered contact solves (8 kB each
+/// at 509 points) would take 8 GB. Module 3's rows and Module 4's output moments read the
+/// contact solves through these rows (Module 4's force predictions and Module 2's prior-node
+/// contexts read the forces themselves), so the rows a calibration meets again (another
+/// coefficient mode on the same experiments and `θ` nodes, a close loop's recalibrations on
+/// overlapping windows, predictions at support points met before) are not solved again. Every
+/// model built by [`SavedModel::multilevel`] has this memo (it costs nothing until rows are
+/// read).
 pub const ROW_MEMO_CAPACITY: usize = 1_000_000;
 
 /// Builds and condenses the gate of `cfg` (Module 1) with its contact model, timed.

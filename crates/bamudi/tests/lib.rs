@@ -584,3 +584,48 @@ fn gp_posterior_covariance_over_noise_variance_is_the_mean_smoother() {
         assert!(err < 1e-8 * mean.amax(), "smoother vs GP mean: {err}");
     }
 }
+
+/// The model-row memo changes no number of a calibration: the beam calibrated (marginal
+/// mode, exact estimator) without a memo, with one, and again with the now-filled memo (every
+/// row a hit) gives the same Module 2 and Module 3, value for value; so does
+/// `rerun_module3` in the paper's mode against a full run in that mode.
+#[test]
+fn row_memo_and_module3_reruns_change_no_calibration() {
+    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let plain = beam_app::beam_model((5.0, 25.0), 4);
+    let memo = beam_app::beam_model((5.0, 25.0), 4).with_row_memo(100_000);
+    let (x, y) = beam_app::simulate(30, 12.3, 0.9, 1.0, 11);
+    let names = (
+        plain.unobservable.input_names(),
+        plain.observable.output_names(),
+    );
+    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    let cfg = CalibrationParams::default()
+        .estimator(EstimatorParams::ExactLinear)
+        .theta_grid_points(41)
+        .check()
+        .unwrap();
+    let json = |c: &bamudi::Calibration| {
+        let m2 = serde_json::to_value(c.module2()).unwrap();
+        (m2, serde_json::to_value(c.module3()).unwrap())
+    };
+    let reference = Calibrate::new(&cfg).run(&plain, &exps).unwrap();
+    let first = Calibrate::new(&cfg).run(&memo, &exps).unwrap();
+    let filled = memo.row_memo().len();
+    assert!(filled > 0, "the calibration read no row through the memo");
+    let second = Calibrate::new(&cfg).run(&memo, &exps).unwrap();
+    assert_eq!(memo.row_memo().len(), filled, "the second run met new rows");
+    assert!(json(&first) == json(&reference) && json(&second) == json(&reference));
+    let paper = cfg
+        .clone()
+        .into_params()
+        .coefficients(CoefficientMode::PriorMarginal)
+        .check()
+        .unwrap();
+    let rerun = Calibrate::new(&paper)
+        .rerun_module3(&memo, &exps, &first)
+        .unwrap();
+    let full = Calibrate::new(&paper).run(&plain, &exps).unwrap();
+    assert!(json(&rerun) == json(&full));
+}

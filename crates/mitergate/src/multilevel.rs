@@ -284,8 +284,9 @@ pub struct MultiLevelSpec {
     /// kB per solve at 509 points); `0`: no memo.
     pub memo_capacity: usize,
     /// Most remembered model rows `A g` and `b` ([`mlmodel::RowMemo`], 14 values per row for
-    /// the 7 gauges): what Module 3 and Module 4 read of the contact solves, kept at a
-    /// sixtieth of a solve's memory; `0`: no memo.
+    /// the 7 gauges, about 260 bytes with the key): what Module 3's rows and Module 4's output
+    /// moments read of the contact solves, at about a thirtieth of a solve's memory; `0`: no
+    /// memo.
     #[serde(default)]
     pub row_memo_capacity: usize,
 }
@@ -419,8 +420,9 @@ pub fn build_contact(cfg: &GateConfig) -> Result<(ContactModel, GateSummary), Ga
 }
 
 /// The gate's multi-level model of `contact` and `spec`: [`ContactForceModel`] memoised with
-/// `spec.memo_capacity` (and its model rows with `spec.row_memo_capacity`), [`StrainModel`], the uniform gap prior `spec.gap_prior_in` and a
-/// Legendre discrepancy basis on `[0, H]` at the gate's representation points.
+/// `spec.memo_capacity` (and its model rows with `spec.row_memo_capacity`), [`StrainModel`],
+/// the uniform gap prior `spec.gap_prior_in` and a Legendre discrepancy basis on `[0, H]` at
+/// the gate's representation points.
 ///
 /// The discrepancy terms are capped at the number of representation points `N_u`
 /// (`spec.discrepancy_terms[c].min(N_u)`): a basis cannot have more independent polynomials

@@ -651,7 +651,8 @@ impl<U: UnobservableModel, O: ObservableModel> MultiLevelModel<U, O> {
     }
 
     /// Remembers up to `capacity` rows of [`model_row`](Self::model_row) (0: none), replacing
-    /// any rows remembered so far.
+    /// any rows remembered so far (call it again after replacing `unobservable` or
+    /// `observable`: the rows belong to the models they came from).
     pub fn with_row_memo(mut self, capacity: usize) -> Self {
         self.rows = RowMemo::new(capacity);
         self

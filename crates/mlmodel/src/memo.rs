@@ -165,6 +165,17 @@ impl<U: UnobservableModel> UnobservableModel for Memo<U> {
 /// nodes in another coefficient mode, or predictions at support points met before) can be
 /// kept for a few hundred bytes each. When it holds `capacity` rows it is cleared (logged at
 /// `info`); `capacity = 0` (the default) remembers nothing.
+///
+/// The rows belong to the model they were computed with: a model whose `unobservable` or
+/// `observable` field is replaced after rows were read must get a new memo
+/// ([`with_row_memo`](crate::MultiLevelModel::with_row_memo)), or it would serve the old rows.
+///
+/// ```
+/// use mlmodel::RowMemo;
+/// let memo = RowMemo::new(1_000);
+/// assert_eq!((memo.capacity(), memo.len(), memo.is_empty()), (1_000, 0, true));
+/// // filled by `MultiLevelModel::model_row` (see its example)
+/// ```
 #[derive(Debug)]
 pub struct RowMemo {
     store: Store,
@@ -208,6 +219,11 @@ impl RowMemo {
         len: usize,
         compute: impl FnOnce(&mut [f64]) -> crate::Result<()>,
     ) -> crate::Result<Arc<[f64]>> {
+        if self.capacity() == 0 {
+            let mut out = vec![0.0; len];
+            compute(&mut out)?;
+            return Ok(Arc::from(out));
+        }
         let key = Store::key(x, theta);
         if let Some(v) = self.store.get(&key)
             && v.len() == len

@@ -57,7 +57,10 @@ where
     // The samples of one pool input are consecutive rows with the same `x`: its context
     // (`n_nodes + 1` model evaluations) is computed once for all of them.
     let firsts: Vec<usize> = (0..set.len())
-        .filter(|&i| i == 0 || set.x.row(i) != set.x.row(i - 1))
+        .filter(|&i| {
+            let bits = |r: usize| set.x.row(r).iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            i == 0 || bits(i) != bits(i - 1)
+        })
         .collect();
     let contexts = firsts
         .par_iter()
