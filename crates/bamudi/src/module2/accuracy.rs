@@ -58,8 +58,8 @@ where
     // (`n_nodes + 1` model evaluations) is computed once for all of them.
     let firsts: Vec<usize> = (0..set.len())
         .filter(|&i| {
-            let bits = |r: usize| set.x.row(r).iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            i == 0 || bits(i) != bits(i - 1)
+            let same = |(a, b): (&f64, &f64)| a.to_bits() == b.to_bits();
+            i == 0 || !set.x.row(i).iter().zip(set.x.row(i - 1).iter()).all(same)
         })
         .collect();
     let contexts = firsts
