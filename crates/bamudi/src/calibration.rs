@@ -204,7 +204,8 @@ impl<'a> Calibrate<'a> {
     /// [`run_with_estimator`](Self::run_with_estimator) gives with `previous`'s estimator, bit
     /// for bit, without refitting the GPs. Errors if `previous` was fitted to another model
     /// or other experiment inputs, or under another `θ` quadrature rule or input box (another
-    /// seed, prior or marginalisation), or another `ρ` search, sampling rule or GP setting.
+    /// seed, prior or marginalisation), or another `ρ` search, sampling rule, GP setting,
+    /// estimator or training-set size.
     ///
     /// ```
     /// # // a tiny two-level model: the response is θ at one point, the output reads it
@@ -521,7 +522,8 @@ impl Calibration {
 
     /// Checks that this calibration's Module 2 holds for `p` (the problem of another mode):
     /// the same model, experiment inputs, `θ` rule, input box, and the configuration that
-    /// Module 2 reads (seed, `ρ` search, sampling rule, GP restarts).
+    /// Module 2 reads (seed, `ρ` search, sampling rule, GP restarts, estimator, training-set
+    /// size).
     fn check_module2_reuse<U, O>(&self, p: &Problem<'_, U, O>) -> Result<()>
     where
         U: UnobservableModel,
@@ -537,6 +539,8 @@ impl Calibration {
             ("ρ search", a.rho != b.rho),
             ("sampling rule", a.sampling != b.sampling),
             ("GP restarts", a.gp_restarts != b.gp_restarts),
+            ("estimator", a.estimator != b.estimator),
+            ("training-set size", a.training_size != b.training_size),
         ];
         match differs.iter().find(|(_, d)| *d) {
             Some((what, _)) => Err(BamudiError::Calibration(format!(

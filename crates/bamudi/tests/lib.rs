@@ -628,4 +628,75 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         .unwrap();
     let full = Calibrate::new(&paper).run(&plain, &exps).unwrap();
     assert!(json(&rerun) == json(&full));
+    // the conditional mode on the paper mode's Module 2 (the reproduction's sensitivity study)
+    let conditional = paper
+        .clone()
+        .into_params()
+        .coefficients(CoefficientMode::ConditionalOnTheta)
+        .check()
+        .unwrap();
+    let rerun = Calibrate::new(&conditional)
+        .rerun_module3(&memo, &exps, &full)
+        .unwrap();
+    let full = Calibrate::new(&conditional).run(&plain, &exps).unwrap();
+    assert!(json(&rerun) == json(&full));
+    // a configuration whose Module 2 would differ is refused, not run on the old one
+    let ridge = conditional
+        .into_params()
+        .estimator(EstimatorParams::Ridge(bamudi::RidgeParams { lambda: 1e-3 }))
+        .check()
+        .unwrap();
+    let err = Calibrate::new(&ridge)
+        .rerun_module3(&memo, &exps, &full)
+        .unwrap_err();
+    assert!(err.to_string().contains("estimator differs"), "{err}");
+}
+
+/// `Predictor::response_moments` (and `output_moments`) are the response (outputs) band's mean
+/// and the variance whose square root is its `sd`, bit for bit, in each
+/// coefficient mode (it is the same mixture without the quantile searches), at loads inside
+/// and outside the experiments' range (point load lbf, uniform load lbf/in).
+#[test]
+fn response_moments_are_the_bands_moments() {
+    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let (x, y) = beam_app::simulate(30, 12.3, 0.9, 1.0, 11);
+    let names = (
+        model.unobservable.input_names(),
+        model.observable.output_names(),
+    );
+    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    for mode in [
+        CoefficientMode::PriorMarginal,
+        CoefficientMode::ConditionalOnTheta,
+        CoefficientMode::Marginal,
+    ] {
+        let cfg = CalibrationParams::default()
+            .estimator(EstimatorParams::ExactLinear)
+            .theta_grid_points(41)
+            .coefficients(mode)
+            .check()
+            .unwrap();
+        let cal = Calibrate::new(&cfg).run(&model, &exps).unwrap();
+        let predictor = cal.predictor(&model).unwrap();
+        for xi in [[1500.0, 20.0], [8000.0, 90.0], [12_000.0, 5.0]] {
+            let xi = &xi[..];
+            let band = predictor.response(xi).unwrap();
+            let (mean, var) = predictor.response_moments(xi).unwrap();
+            assert_eq!(mean, band.mean, "{mode:?} at {xi:?}");
+            let sd: Vec<f64> = var.iter().map(|v| v.sqrt()).collect();
+            assert_eq!(sd, band.sd, "{mode:?} at {xi:?}");
+            // the band is not degenerate: its quantiles are what response_moments skips
+            assert!(band.lower.iter().zip(&band.upper).any(|(l, u)| u > l));
+            // and the outputs' moments, many rows at once, are the outputs band's
+            let out = predictor.outputs(xi).unwrap();
+            let (m, v) = predictor
+                .output_moments(&DMatrix::from_row_slice(1, xi.len(), xi))
+                .unwrap();
+            assert_eq!(m.row(0).iter().copied().collect::<Vec<_>>(), out.mean);
+            let sd: Vec<f64> = v.row(0).iter().map(|v| v.sqrt()).collect();
+            assert_eq!(sd, out.sd, "{mode:?} at {xi:?}");
+        }
+    }
 }

@@ -181,7 +181,7 @@ pub(super) fn score(
         .map(|x| -> Result<_> {
             let truth_f = truth::true_forces(scenario, contact, *x)?;
             let before = prior_mean_response(model, x)?;
-            let after = predictor.response(x)?.mean;
+            let (after, _) = predictor.response_moments(x)?;
             let with = predictor.outputs(x)?.mean;
             let without = no_discrepancy_strain(model, cal, x)?;
             Ok((x, truth_f, before, after, with, without))
