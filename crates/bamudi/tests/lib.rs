@@ -617,24 +617,18 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
     let second = Calibrate::new(&cfg).run(&memo, &exps).unwrap();
     assert_eq!(memo.row_memo().len(), filled, "the second run met new rows");
     assert!(json(&first) == json(&reference) && json(&second) == json(&reference));
-    let paper = cfg
-        .clone()
-        .into_params()
-        .coefficients(CoefficientMode::PriorMarginal)
-        .check()
-        .unwrap();
+    let in_mode = |mode| {
+        let params = cfg.clone().into_params().coefficients(mode);
+        params.check().unwrap()
+    };
+    let paper = in_mode(CoefficientMode::PriorMarginal);
     let rerun = Calibrate::new(&paper)
         .rerun_module3(&memo, &exps, &first)
         .unwrap();
     let full = Calibrate::new(&paper).run(&plain, &exps).unwrap();
     assert!(json(&rerun) == json(&full));
     // the conditional mode on the paper mode's Module 2 (the reproduction's sensitivity study)
-    let conditional = paper
-        .clone()
-        .into_params()
-        .coefficients(CoefficientMode::ConditionalOnTheta)
-        .check()
-        .unwrap();
+    let conditional = in_mode(CoefficientMode::ConditionalOnTheta);
     let rerun = Calibrate::new(&conditional)
         .rerun_module3(&memo, &exps, &full)
         .unwrap();
