@@ -185,6 +185,21 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// point that took about half of `response`'s time in the paper-size profile: for callers
     /// that want only the mean, such as an error score. Checked against `response` in the
     /// crate tests (`response_moments_are_the_bands_moments`).
+    ///
+    /// ```
+    /// use bamudi::Predictor;
+    /// use mlmodel::{LinearObservableModel, UnobservableModel};
+    /// /// The RMS error of the corrected response against a known truth at `x`.
+    /// fn rmse<U: UnobservableModel, O: LinearObservableModel>(
+    ///     p: &Predictor<'_, U, O>,
+    ///     x: &[f64],
+    ///     truth: &[f64],
+    /// ) -> bamudi::Result<f64> {
+    ///     let (mean, _var) = p.response_moments(x)?; // no quantile searches
+    ///     let sq: f64 = mean.iter().zip(truth).map(|(m, t)| (m - t).powi(2)).sum();
+    ///     Ok((sq / mean.len() as f64).sqrt())
+    /// }
+    /// ```
     pub fn response_moments(&self, x: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
         Ok(mixture_moments(
             &self.response_components(x)?,
