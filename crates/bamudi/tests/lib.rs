@@ -632,19 +632,20 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         let params = cfg.clone().into_params().coefficients(mode);
         params.check().unwrap()
     };
+    // Module 3 re-run on `base` equals the full calibration in `params`' mode (returned).
+    let rerun_equals_run = |params: &bamudi::CalibrationConfig, base| {
+        let rerun = Calibrate::new(params)
+            .rerun_module3(&memo, &exps, base)
+            .unwrap();
+        let full = Calibrate::new(params).run(&plain, &exps).unwrap();
+        assert!(json(&rerun) == json(&full));
+        full
+    };
     let paper = in_mode(CoefficientMode::PriorMarginal);
-    let rerun = Calibrate::new(&paper)
-        .rerun_module3(&memo, &exps, &first)
-        .unwrap();
-    let full = Calibrate::new(&paper).run(&plain, &exps).unwrap();
-    assert!(json(&rerun) == json(&full));
+    let full = rerun_equals_run(&paper, &first);
     // the conditional mode on the paper mode's Module 2 (the reproduction's sensitivity study)
     let conditional = in_mode(CoefficientMode::ConditionalOnTheta);
-    let rerun = Calibrate::new(&conditional)
-        .rerun_module3(&memo, &exps, &full)
-        .unwrap();
-    let full = Calibrate::new(&conditional).run(&plain, &exps).unwrap();
-    assert!(json(&rerun) == json(&full));
+    rerun_equals_run(&conditional, &full);
     // a configuration whose Module 2 would differ is refused, not run on the old one
     let ridge = conditional
         .into_params()
