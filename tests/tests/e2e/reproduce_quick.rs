@@ -107,7 +107,27 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
         );
         assert!(c.strain_rmse.with_discrepancy < s.discrepancy_strain_rms);
         check_marginal(s);
+        check_stage_timings(s);
     }
+}
+
+/// The report's profile of a scenario: every stage that ran is listed once, and the stages
+/// account for the scenario's wall time. Only building the result struct runs between the last
+/// stage and the total, so 10 ms is ample (a missing stage of this run takes far longer).
+fn check_stage_timings(s: &bamudi_gate::paper::ScenarioResult) {
+    let t = &s.timings_s;
+    let names: Vec<&str> = t.stages.iter().map(|x| x.stage.as_str()).collect();
+    for expected in ["synthetic truth", "conditional mode", "marginal mode", "fatigue"] {
+        let hits = names.iter().filter(|n| n.contains(expected)).count();
+        assert_eq!(hits, 1, "{}: stage {expected:?} in {names:?}", s.name);
+    }
+    let sum: f64 = t.stages.iter().map(|x| x.seconds).sum();
+    assert!(
+        t.stages.iter().all(|x| x.seconds >= 0.0) && sum <= t.total && t.total - sum < 0.01,
+        "{}: stages {sum} s vs total {} s",
+        s.name,
+        t.total
+    );
 }
 
 /// The default mode: θ and ρ learnt and near the truth, the force corrected, δ reconstructed.

@@ -37,6 +37,12 @@ force through the fatigue model, `bamudi::Predictor::predict_through`). The dama
 5th power of the stress, i.e. the 2.5th power of the line load: a 10 % force error is a 27 % \
 damage error.\n\n";
 
+/// Printed above the table of stage timings.
+pub(super) const STAGES_NOTE: &str = "\n## Where the time goes\n\n\
+Wall time of each stage of a scenario, in the order they ran (Module 1, the gate's build, is in \
+the first line of this report; the calibration's own split into Module 2 and Module 3 is in the \
+table above). The plots are written after the scenario and are not counted.\n\n";
+
 /// Printed under each sensitivity table.
 pub(super) const SENSITIVITY_NOTE: &str = "\nThe ρ range shapes only the training set of learnt estimators; the exact linear \
 estimator needs no training set, so its ρ-range rows equal the default row (kept to show that). \
@@ -84,7 +90,33 @@ impl ReproduceReport {
         for r in self.scenarios.iter().filter(|r| !r.sensitivity.is_empty()) {
             sensitivity_table(&mut s, r);
         }
+        if self
+            .scenarios
+            .iter()
+            .any(|r| !r.timings_s.stages.is_empty())
+        {
+            self.stage_table(&mut s);
+        }
         s
+    }
+
+    /// Where each scenario's wall time went, stage by stage (issue 20's profile of the job).
+    fn stage_table(&self, s: &mut String) {
+        s.push_str(STAGES_NOTE);
+        s.push_str("| stage | S1 (s) | S2 (s) |\n|---|---|---|\n");
+        let first = &self.scenarios[0].timings_s.stages;
+        for (i, stage) in first.iter().enumerate() {
+            let (a, b) = self.cells(&|r| {
+                r.timings_s
+                    .stages
+                    .get(i)
+                    .map(|t| format!("{:.1}", t.seconds))
+                    .unwrap_or_default()
+            });
+            s.push_str(&format!("| {} | {a} | {b} |\n", stage.stage));
+        }
+        let (a, b) = self.cells(&|r| format!("{:.1}", r.timings_s.total));
+        s.push_str(&format!("| scenario total | {a} | {b} |\n"));
     }
 
     /// The prediction level: quoin-block fatigue before and after calibration.

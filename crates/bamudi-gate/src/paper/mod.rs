@@ -165,6 +165,47 @@ pub struct ScenarioTimings {
     pub module3: f64,
     /// Whole scenario including truth generation and Module 4 scoring (not Module 1).
     pub total: f64,
+    /// The scenario's stages in the order they ran, each with its wall time; they add up to
+    /// `total` (empty in reports written before it existed).
+    #[serde(default)]
+    pub stages: Vec<StageSeconds>,
+}
+
+/// Wall time of one stage of a scenario.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// What ran, e.g. "calibration (paper's Module 3)".
+    pub stage: String,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+/// Splits a scenario's wall time into stages: each [`StageClock::lap`] closes the stage that
+/// ran since the previous one.
+struct StageClock {
+    start: Instant,
+    last: Instant,
+    stages: Vec<StageSeconds>,
+}
+
+impl StageClock {
+    fn start() -> Self {
+        let now = Instant::now();
+        Self {
+            start: now,
+            last: now,
+            stages: Vec::new(),
+        }
+    }
+
+    fn lap(&mut self, stage: &str) {
+        let now = Instant::now();
+        self.stages.push(StageSeconds {
+            stage: stage.into(),
+            seconds: (now - self.last).as_secs_f64(),
+        });
+        self.last = now;
+    }
 }
 
 /// One row of the sampling-rule sensitivity study.
@@ -465,26 +506,32 @@ pub fn run_scenario(
     opts: &ReproduceOptions,
     observer: &dyn bamudi::observe::Observer,
 ) -> Result<(ScenarioResult, Calibration, GateMultiLevel)> {
-    let t_total = Instant::now();
+    let mut clock = StageClock::start();
     let s = ScenarioRun::new(contact, number, opts)?;
+    clock.lap("synthetic truth");
     let cfg = calibration_params(opts, SamplingRule::default()).check()?;
     let cal = Calibrate::new(&cfg)
         .observer(observer)
         .run(&s.model, &s.exps)?;
+    clock.lap("calibration: Modules 2-3 (paper's Module 3)");
     let scores = score(&s.model, &cal, &s.scenario, contact, &s.new_x)?;
+    clock.lap("scores of the paper's Module 3");
     let variant = |on: bool, mode| match on {
         true => run_variant(&s, &cal, &scores, mode, observer).map(Some),
         false => Ok(None),
     };
     let conditional = variant(opts.conditional, CoefficientMode::ConditionalOnTheta)?.map(|v| v.0);
+    clock.lap("conditional mode: Module 3 re-run and scores");
     let (marginal, headline) = match variant(opts.marginal, CoefficientMode::Marginal)? {
         Some((result, cal)) => (Some(result), Some(cal)),
         None => (None, None),
     };
+    clock.lap("marginal mode: Module 3 re-run and scores");
     let sens = match opts.sensitivity {
         true => sensitivity::study(contact, &s.model, s.scenario.prior, &s.exps, opts)?,
         false => Vec::new(),
     };
+    clock.lap("sampling-rule sensitivity study");
     let accuracy = estimator_accuracy(
         &s.model,
         cal.parts(),
@@ -493,6 +540,7 @@ pub fn run_scenario(
         ACCURACY_SAMPLES,
         opts.seed.wrapping_add(500 + number as u64),
     )?;
+    clock.lap("estimator accuracy (Fig. 12)");
     let x_fatigue = fatigue::condition(number);
     let profile = fatigue::damage_along_quoin(
         &s.model,
@@ -502,6 +550,9 @@ pub fn run_scenario(
         x_fatigue,
         opts.seed.wrapping_add(700 + number as u64),
     )?;
+    clock.lap("quoin-block fatigue");
+    let discrepancy_strain_rms = s.discrepancy_strain_rms();
+    clock.lap("true discrepancy's strain");
     let (m3, tm) = (cal.module3(), cal.timings());
     let result = ScenarioResult {
         name: format!("scenario {number}"),
@@ -512,14 +563,15 @@ pub fn run_scenario(
         theta_posterior_no_discrepancy: m3.posterior_no_discrepancy.summary(0),
         force_rmse: scores.force,
         strain_rmse: scores.strain,
-        discrepancy_strain_rms: s.discrepancy_strain_rms(),
+        discrepancy_strain_rms,
         sigma_eps: cal.sigma_eps(),
         discrepancy: scores.discrepancy.clone(),
         estimator_accuracy: accuracy,
         timings_s: ScenarioTimings {
             module2: tm.module2_s(),
             module3: tm.coefficients_s + tm.module3_s,
-            total: t_total.elapsed().as_secs_f64(),
+            total: clock.start.elapsed().as_secs_f64(),
+            stages: clock.stages,
         },
         sensitivity: sens,
         conditional,
