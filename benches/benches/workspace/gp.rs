@@ -59,5 +59,30 @@ pub fn benches(c: &mut Criterion) {
     group.bench_function("predict_mean_var_2500", |b| {
         b.iter(|| model.predict(black_box(&xs)).unwrap())
     });
+    contracted_covariance(&mut group, &model, &x);
     group.finish();
+}
+
+/// `Σ(x*, X) w` at one new input against the 500 training inputs, as the conditional mode's
+/// Module 4 needs it per predicted input: the dense route (`posterior_cov` times `w`) against
+/// the contraction reduced once (`covariance_contraction`, whose one-off cost is benchmarked
+/// too).
+fn contracted_covariance(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    model: &gp::GpModel,
+    x: &DMatrix<f64>,
+) {
+    let w: Vec<f64> = (0..x.nrows()).map(|i| (i as f64 * 0.37).sin()).collect();
+    let wv = nalgebra::DVector::from_column_slice(&w);
+    let one = DMatrix::from_row_slice(1, 2, &[300.0, 410.0]);
+    group.bench_function("cov_times_w_500_dense_one_input", |b| {
+        b.iter(|| model.posterior_cov(black_box(&one), x).unwrap() * &wv)
+    });
+    group.bench_function("cov_times_w_500_reduce", |b| {
+        b.iter(|| model.covariance_contraction(black_box(x), &w).unwrap())
+    });
+    let reduced = model.covariance_contraction(x, &w).expect("contraction");
+    group.bench_function("cov_times_w_500_contracted_one_input", |b| {
+        b.iter(|| reduced.apply(model, black_box(&one)).unwrap())
+    });
 }

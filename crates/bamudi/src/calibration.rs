@@ -18,6 +18,7 @@ use crate::observe::{Event, Observer, Silent, Stage};
 use crate::params::CalibrationConfig;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -78,6 +79,10 @@ pub struct Calibration {
     /// The marginal mode's factorisation, rebuilt on first use by Module 4.
     #[serde(skip)]
     marginal_state: std::sync::OnceLock<std::sync::Arc<marginal::MarginalState>>,
+    /// The conditional mode's coefficient shifts `x ↦ Σ_k(x, X) w_k`, reduced on first use
+    /// by Module 4 (one reduction per coefficient instead of one per predicted input).
+    #[serde(skip)]
+    alpha_shifts: std::sync::OnceLock<Vec<gp::CovarianceContraction>>,
 }
 
 /// Runs Modules 2-3 of BA-MUDI for a linear observable model with the default (silent)
@@ -350,6 +355,7 @@ impl<'a> Calibrate<'a> {
             timings: t,
             adequacy: None,
             marginal_state: std::sync::OnceLock::new(),
+            alpha_shifts: std::sync::OnceLock::new(),
         };
         let mut timings = cal.timings.clone();
         cal.adequacy = self.adequacy(&p, &cal, &mut timings)?;
@@ -492,9 +498,13 @@ impl Calibration {
         let gps = self.coefficient_gps();
         let (mut mean, var) = gps.predict(x)?;
         if let Some(w) = &self.module3.alpha_correction {
-            for k in 0..mean.ncols() {
-                let cross = gps.covariance(k, x, &self.x_experiments)?;
-                let shift = cross * w.column(k);
+            for (k, shift) in self.alpha_shifts(gps, w)?.iter().enumerate() {
+                let shift = shift
+                    .apply(&gps.models[k], x)
+                    .map_err(|e| BamudiError::Gp {
+                        coefficient: k,
+                        reason: e.to_string(),
+                    })?;
                 mean.column_mut(k)
                     .iter_mut()
                     .zip(shift.iter())
@@ -502,6 +512,33 @@ impl Calibration {
             }
         }
         Ok((mean, var))
+    }
+
+    /// The reduced shifts `x ↦ Σ_k(x, X) w_k` of [`Self::alpha_moments`] (built on first use,
+    /// then shared): the GP mean moved by the conditional mode's correction of its targets.
+    fn alpha_shifts(
+        &self,
+        gps: &CoefficientGps,
+        w: &DMatrix<f64>,
+    ) -> Result<&[gp::CovarianceContraction]> {
+        if let Some(s) = self.alpha_shifts.get() {
+            return Ok(s);
+        }
+        let shifts = gps
+            .models
+            .par_iter()
+            .enumerate()
+            .map(|(k, model)| {
+                let wk: Vec<f64> = w.column(k).iter().copied().collect();
+                model
+                    .covariance_contraction(&self.x_experiments, &wk)
+                    .map_err(|e| BamudiError::Gp {
+                        coefficient: k,
+                        reason: e.to_string(),
+                    })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(self.alpha_shifts.get_or_init(|| shifts))
     }
 
     /// The marginal mode's factorisation for Module 4 (built on first use, then shared).

@@ -97,6 +97,7 @@
 #[cfg(doctest)]
 pub struct ReadmeDoctest;
 
+mod contraction;
 mod error;
 mod kernel;
 mod likelihood;
@@ -106,6 +107,7 @@ mod model;
 mod params;
 mod validate;
 
+pub use contraction::CovarianceContraction;
 pub use error::GpError;
 pub use kernel::Kernel;
 pub use likelihood::{BoundedLml, LmlProblem, LmlValue, NoiseModel};

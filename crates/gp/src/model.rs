@@ -52,7 +52,11 @@ impl Scaling {
     }
 
     /// Row-major standardised copy.
-    fn standardize_rows(&self, x: &DMatrix<f64>, rows: std::ops::Range<usize>) -> Vec<f64> {
+    pub(crate) fn standardize_rows(
+        &self,
+        x: &DMatrix<f64>,
+        rows: std::ops::Range<usize>,
+    ) -> Vec<f64> {
         let d = x.ncols();
         let mut out = Vec::with_capacity(rows.len() * d);
         for r in rows {
@@ -133,27 +137,27 @@ pub struct FitDiagnostics {
 /// All public results are in original units; internally inputs and outputs are standardised.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct GpModel {
-    kernel: Kernel,
-    mean: Mean,
+    pub(crate) kernel: Kernel,
+    pub(crate) mean: Mean,
     noise_estimated: bool,
-    scaling: Scaling,
-    n: usize,
-    d: usize,
-    p: usize,
+    pub(crate) scaling: Scaling,
+    pub(crate) n: usize,
+    pub(crate) d: usize,
+    pub(crate) p: usize,
     /// Row-major standardised training inputs.
-    x_std: Vec<f64>,
+    pub(crate) x_std: Vec<f64>,
     log_params: Vec<f64>,
-    sf2: f64,
-    inv_ls2: Vec<f64>,
-    sn2: f64,
+    pub(crate) sf2: f64,
+    pub(crate) inv_ls2: Vec<f64>,
+    pub(crate) sn2: f64,
     /// Column-major lower Cholesky factor of `K + (σ_n² + jitter) I` (standardised units).
     chol: Vec<f64>,
     alpha: Vec<f64>,
     /// Column-major `L⁻¹ H`.
-    linv_h: Vec<f64>,
+    pub(crate) linv_h: Vec<f64>,
     beta: Vec<f64>,
-    a_chol: Vec<f64>,
-    lml_std: f64,
+    pub(crate) a_chol: Vec<f64>,
+    pub(crate) lml_std: f64,
     diagnostics: FitDiagnostics,
 }
 
@@ -210,7 +214,7 @@ impl GpModel {
         }
     }
 
-    fn chol_ref(&self) -> MatRef<'_, f64> {
+    pub(crate) fn chol_ref(&self) -> MatRef<'_, f64> {
         MatRef::from_column_major_slice(&self.chol, self.n, self.n)
     }
 
@@ -231,7 +235,7 @@ impl GpModel {
 
     /// For standardised row-major points: latent mean (standardised), `V = L⁻¹ k*` and
     /// `U = L_A⁻¹ (h* − Hᵀ K⁻¹ k*)` (the Eq. A4 vectors), both column per point.
-    fn latent_parts(&self, a: &[f64]) -> (Vec<f64>, Mat<f64>, Mat<f64>) {
+    pub(crate) fn latent_parts(&self, a: &[f64]) -> (Vec<f64>, Mat<f64>, Mat<f64>) {
         let (d, p) = (self.d, self.p);
         let na = a.len() / d;
         let mut v = self.cross_cov(a);

@@ -117,7 +117,12 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
 fn check_stage_timings(s: &bamudi_gate::paper::ScenarioResult) {
     let t = &s.timings_s;
     let names: Vec<&str> = t.stages.iter().map(|x| x.stage.as_str()).collect();
-    for expected in ["synthetic truth", "conditional mode", "marginal mode", "fatigue"] {
+    for expected in [
+        "synthetic truth",
+        "conditional mode",
+        "marginal mode",
+        "fatigue",
+    ] {
         let hits = names.iter().filter(|n| n.contains(expected)).count();
         assert_eq!(hits, 1, "{}: stage {expected:?} in {names:?}", s.name);
     }

@@ -189,3 +189,59 @@ fn model_is_send_and_sync() {
     assert_send_sync::<gp::GpModel>();
     assert_send_sync::<gp::LmlProblem>();
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 16, .. ProptestConfig::default() })]
+
+    /// The contraction `x ↦ Σ(x, X₂) w` equals the dense covariance times `w`, for every
+    /// kernel and trend, at points inside and outside the data (a wrong sign or a dropped
+    /// GLS term moves it by the size of the terms themselves, O(σ_f² |w|)).
+    #[test]
+    fn contraction_matches_the_dense_covariance(
+        k in kernel(), m in mean(), d in 1usize..=2, n in 10usize..=25, seed in 0u64..500,
+    ) {
+        let (x, y) = smooth_data(n, d, 0.05, seed);
+        let model = GpParams::new().kernel(k).mean(m).restarts(1).seed(seed).fit(&x, &y).unwrap();
+        let x2 = test_points(d, 17);
+        let w: Vec<f64> = (0..17).map(|i| ((i * 7 + seed as usize) % 11) as f64 - 5.0).collect();
+        let xs = test_points(d, 23);
+        let dense = model.posterior_cov(&xs, &x2).unwrap() * DVector::from_column_slice(&w);
+        let fast = model.covariance_contraction(&x2, &w).unwrap().apply(&model, &xs).unwrap();
+        // Both routes cancel terms of size σ_f² |w|₁ down to the result; 1e-9 of that is
+        // rounding of sums over at most 25 training points, far below any real difference.
+        let scale = (model.hyperparameters().signal_variance + 1.0)
+            * w.iter().map(|v| v.abs()).sum::<f64>();
+        prop_assert!((&fast - &dense).amax() <= 1e-9 * scale, "{fast} vs {dense}");
+    }
+}
+
+#[test]
+fn contraction_refuses_another_model_and_bad_weights() {
+    let (x, y) = crate::strategies::smooth_data(12, 1, 0.05, 3);
+    let a = GpParams::new().restarts(0).fit(&x, &y).unwrap();
+    let y2: Vec<f64> = y.iter().map(|v| 2.0 * v).collect();
+    let b = GpParams::new().restarts(0).fit(&x, &y2).unwrap();
+    let x2 = test_points(1, 4);
+    let c = a.covariance_contraction(&x2, &[1.0; 4]).unwrap();
+    assert!(matches!(
+        c.apply(&b, &x2),
+        Err(gp::GpError::InvalidParameter { name: "model", .. })
+    ));
+    assert!(matches!(
+        a.covariance_contraction(&x2, &[1.0; 3]),
+        Err(gp::GpError::ShapeMismatch {
+            name: "w",
+            expected: 4,
+            found: 3,
+            ..
+        })
+    ));
+    assert!(matches!(
+        a.covariance_contraction(&x2, &[1.0, f64::NAN, 0.0, 0.0]),
+        Err(gp::GpError::NonFinite {
+            name: "w",
+            row: 1,
+            ..
+        })
+    ));
+}
