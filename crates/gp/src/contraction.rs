@@ -11,7 +11,7 @@
 use crate::GpError;
 use crate::linalg::small_backward_solve;
 use crate::model::GpModel;
-use crate::validate::check_points;
+use crate::validate::{check_per_row, check_points};
 use faer::linalg::triangular_solve::solve_upper_triangular_in_place;
 use faer::{Mat, Par};
 use nalgebra::{DMatrix, DVector};
@@ -58,23 +58,7 @@ impl GpModel {
         w: &[f64],
     ) -> Result<CovarianceContraction, GpError> {
         check_points(x2, self.d, "x2")?;
-        if w.len() != x2.nrows() {
-            return Err(GpError::ShapeMismatch {
-                name: "w",
-                what: "entries",
-                expected: x2.nrows(),
-                found: w.len(),
-            });
-        }
-        if let Some(row) = w.iter().position(|v| !v.is_finite()) {
-            let value = w[row];
-            return Err(GpError::NonFinite {
-                name: "w",
-                row,
-                col: 0,
-                value,
-            });
-        }
+        check_per_row(x2, w, "w")?;
         let x2_std = self.scaling.standardize_rows(x2, 0..x2.nrows());
         let (_, v2, u2) = self.latent_parts(&x2_std);
         let weighted = |m: &Mat<f64>| -> Vec<f64> {
@@ -111,10 +95,16 @@ impl GpModel {
         ]
     }
 
-    /// Standardised signal covariance `k(a, b)` of two standardised points.
-    fn signal_cov(&self, a: &[f64], b: &[f64]) -> f64 {
-        let r2 = crate::kernel::scaled_sq_dist(a, b, &self.inv_ls2);
-        self.sf2 * self.kernel.correlation(r2)
+    /// `Σ_j k(a, b_j) w_j`: the standardised signal covariance of the standardised point `a`
+    /// with the row-major standardised points `b`, weighted.
+    fn weighted_signal_cov(&self, a: &[f64], b: &[f64], w: &[f64]) -> f64 {
+        b.chunks_exact(self.d)
+            .zip(w)
+            .map(|(b, w)| {
+                let r2 = crate::kernel::scaled_sq_dist(a, b, &self.inv_ls2);
+                self.sf2 * self.kernel.correlation(r2) * w
+            })
+            .sum()
     }
 }
 
@@ -130,23 +120,12 @@ impl CovarianceContraction {
             });
         }
         check_points(x, model.d, "x")?;
-        let d = model.d;
         let ys2 = model.scaling.y_scale.powi(2);
         let mut h = vec![0.0; model.p];
         Ok(DVector::from_fn(x.nrows(), |r, _| {
             let a = model.scaling.standardize_rows(x, r..r + 1);
-            let prior: f64 = self
-                .x2_std
-                .chunks_exact(d)
-                .zip(&self.w)
-                .map(|(b, w)| model.signal_cov(&a, b) * w)
-                .sum();
-            let data: f64 = model
-                .x_std
-                .chunks_exact(d)
-                .zip(&self.c)
-                .map(|(b, c)| model.signal_cov(&a, b) * c)
-                .sum();
+            let prior = model.weighted_signal_cov(&a, &self.x2_std, &self.w);
+            let data = model.weighted_signal_cov(&a, &model.x_std, &self.c);
             model.mean.basis_into(&a, &mut h);
             let trend: f64 = h.iter().zip(&self.s).map(|(h, s)| h * s).sum();
             (prior - data + trend) * ys2

@@ -6,20 +6,30 @@ use nalgebra::DMatrix;
 /// Checks training data: non-empty, `y.len() == x.nrows()`, all finite.
 pub(crate) fn check_training(x: &DMatrix<f64>, y: &[f64]) -> Result<(), GpError> {
     check_matrix(x, "x")?;
-    if y.is_empty() {
-        return Err(GpError::EmptyData { name: "y" });
+    check_per_row(x, y, "y")
+}
+
+/// Checks values `v` (named `name`) given one per row of `x`: non-empty, as many as rows, all
+/// finite.
+pub(crate) fn check_per_row(
+    x: &DMatrix<f64>,
+    v: &[f64],
+    name: &'static str,
+) -> Result<(), GpError> {
+    if v.is_empty() {
+        return Err(GpError::EmptyData { name });
     }
-    if y.len() != x.nrows() {
+    if v.len() != x.nrows() {
         return Err(GpError::ShapeMismatch {
-            name: "y",
+            name,
             what: "entries (one per row of x)",
             expected: x.nrows(),
-            found: y.len(),
+            found: v.len(),
         });
     }
-    if let Some((row, &value)) = y.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+    if let Some((row, &value)) = v.iter().enumerate().find(|(_, v)| !v.is_finite()) {
         return Err(GpError::NonFinite {
-            name: "y",
+            name,
             row,
             col: 0,
             value,
