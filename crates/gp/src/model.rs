@@ -149,7 +149,7 @@ pub struct GpModel {
     log_params: Vec<f64>,
     pub(crate) sf2: f64,
     pub(crate) inv_ls2: Vec<f64>,
-    pub(crate) sn2: f64,
+    sn2: f64,
     /// Column-major lower Cholesky factor of `K + (σ_n² + jitter) I` (standardised units).
     chol: Vec<f64>,
     alpha: Vec<f64>,
