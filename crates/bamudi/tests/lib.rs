@@ -633,6 +633,8 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         params.check().unwrap()
     };
     // Module 3 re-run on `base` equals the full calibration in `params`' mode (returned).
+    // Both checks below go through this closure; it holds the same `json(rerun) == json(full)`
+    // assertion each of them had written out before (folded, not changed).
     let rerun_equals_run = |params: &bamudi::CalibrationConfig, base| {
         let rerun = Calibrate::new(params)
             .rerun_module3(&memo, &exps, base)
