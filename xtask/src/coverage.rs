@@ -46,7 +46,27 @@ pub struct CoverageArgs {
     /// Shape of the true discrepancy.
     #[arg(long, value_enum, default_value = "paper")]
     discrepancy: coverage::DiscrepancyShape,
-    /// Marginal mode: the coefficients' prior scales, shared_per_component or per_coefficient.
+    /// Multiply the discrepancy shape by this factor (`--discrepancy paper --discrepancy-scale
+    /// 2`: twice the paper's).
+    #[arg(long, default_value_t = 1.0)]
+    discrepancy_scale: f64,
+    /// A true discrepancy of your own instead of a shape: a table (`.csv`, columns
+    /// `h_up,h_down,d_u,normal,tangential` on a full grid spanning the levels 24-744 in and the
+    /// quoin) or coefficients (`.toml`, Legendre series times a load; see
+    /// `bamudi_gate::coverage::DeltaFile`).
+    #[arg(long)]
+    discrepancy_file: Option<PathBuf>,
+    /// Simulation-based calibration: draw θ, ρ and the discrepancy per replicate from the
+    /// calibration's isotropic prior with these hyper-parameters, `AMPLITUDE,LENGTH_FACTOR,
+    /// LEVEL_VARIANCE,NOISE_SD`, and calibrate with `--sbc-hold` (holding them) or without
+    /// (estimating them as the product does). Needs `--scales isotropic`.
+    #[arg(long, value_delimiter = ',')]
+    sbc: Option<Vec<f64>>,
+    /// With `--sbc`: hold the generating hyper-parameters in the calibration.
+    #[arg(long)]
+    sbc_hold: bool,
+    /// Marginal mode: the coefficients' prior scales, isotropic, shared_per_component or
+    /// per_coefficient.
     #[arg(long, default_value = "shared_per_component")]
     scales: String,
     /// Marginal mode: the coefficients' kernel, module2 or matern52.
@@ -128,6 +148,26 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
     o.mesh_element_size = a.mesh.or(o.mesh_element_size);
     o.scenarios = a.scenarios.clone().unwrap_or(o.scenarios);
     (o.threads, o.seed, o.discrepancy) = (a.threads, a.seed, a.discrepancy);
+    o.discrepancy_scale = a.discrepancy_scale;
+    o.discrepancy_file = a.discrepancy_file.clone();
+    o.sbc = match a.sbc.as_deref() {
+        None if a.sbc_hold => bail!("--sbc-hold needs --sbc"),
+        None => None,
+        Some(&[amplitude, length_scale_factor, level_variance, noise_sd]) => {
+            Some(coverage::SbcOptions {
+                hyper: coverage::GeneratingHyper {
+                    amplitude,
+                    length_scale_factor,
+                    level_variance,
+                    noise_sd,
+                },
+                hold: a.sbc_hold,
+            })
+        }
+        Some(other) => {
+            bail!("--sbc: expected AMPLITUDE,LENGTH_FACTOR,LEVEL_VARIANCE,NOISE_SD, got {other:?}")
+        }
+    };
     o.rho_range = match a.rho_range.as_deref() {
         None => None,
         Some(&[lo, hi]) => Some((lo, hi)),
@@ -137,7 +177,7 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
         scales: serde_json::from_value(serde_json::Value::String(a.scales.clone())).with_context(
             || {
                 format!(
-                    "--scales {}: expected shared_per_component or per_coefficient",
+                    "--scales {}: expected isotropic, shared_per_component or per_coefficient",
                     a.scales
                 )
             },
@@ -151,6 +191,7 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
                 )
             })?,
         level_variance: a.level_variance,
+        fixed: None,
     };
     Ok(o)
 }
@@ -328,6 +369,19 @@ fn tag(a: &CoverageArgs, o: &CoverageOptions) -> String {
         && o.discrepancy != coverage::DiscrepancyShape::Paper
     {
         tag.push_str(&format!("-{shape}"));
+    }
+    if o.discrepancy_scale != 1.0 {
+        tag.push_str(&format!("-x{}", o.discrepancy_scale));
+    }
+    if let Some(stem) = o.discrepancy_file.as_ref().and_then(|p| p.file_stem()) {
+        tag.push_str(&format!("-file-{}", stem.to_string_lossy()));
+    }
+    if let Some(sbc) = &o.sbc {
+        tag.push_str(if sbc.hold {
+            "-sbc-held"
+        } else {
+            "-sbc-estimated"
+        });
     }
     if o.marginal != bamudi::MarginalPrior::default() {
         tag.push_str("-prior-variant");

@@ -22,6 +22,7 @@
 #[cfg(doctest)]
 pub struct ReadmeDoctest;
 
+pub mod baselines;
 pub mod calibrator;
 pub mod coverage;
 pub mod error;

@@ -360,6 +360,30 @@ pub struct MarginalPrior {
     /// assert!(bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = -1").is_err());
     /// ```
     pub level_variance: f64,
+    /// Hold the amplitude `s` and the length-scale factor at these values instead of fitting
+    /// them by type-II maximum likelihood (`None`, the default, fits them). Needs `sigma_eps`
+    /// too, so that nothing is estimated: the setting of simulation-based calibration, where
+    /// the data are drawn from this very prior.
+    ///
+    /// ```
+    /// let text = "sigma_eps = 1.0\n[marginal.fixed]\namplitude = 1e-5\nlength_scale_factor = 1.0";
+    /// assert!(bamudi::CalibrationConfig::from_toml_str(text).is_ok());
+    /// // without sigma_eps something would still be fitted: refused, naming the key
+    /// let e = bamudi::CalibrationConfig::from_toml_str(&text[16..]).unwrap_err();
+    /// assert!(e.to_string().contains("marginal.fixed"), "{e}");
+    /// ```
+    pub fixed: Option<FixedHyper>,
+}
+
+/// Hyper-parameters of the marginal mode held at given values ([`MarginalPrior::fixed`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FixedHyper {
+    /// The amplitude `s` (dimensionless: the coefficients' variance relative to their
+    /// scales' squares).
+    pub amplitude: f64,
+    /// The factor on the coefficients' length scales.
+    pub length_scale_factor: f64,
 }
 
 /// The largest accepted [`MarginalPrior::level_variance`]: beyond it the level directions'
@@ -403,6 +427,7 @@ impl Default for MarginalPrior {
             mask_outside_support: true,
             kernel: CoefficientKernel::Matern52,
             level_variance: DEFAULT_LEVEL_VARIANCE,
+            fixed: None,
         }
     }
 }
@@ -419,6 +444,15 @@ pub enum CoefficientScales {
     /// unknown), while the size still follows the nominal response.
     #[default]
     SharedPerComponent,
+    /// One force-unit scale for every coefficient of every component: the root mean square
+    /// `r(x)` of the nominal response `g_u(x, θ̄)` over all its points. The supported basis is
+    /// orthonormalised in the response's own metric (a unit coefficient is a correction of unit
+    /// root mean square over the points of its component) and every coefficient function
+    /// shares one correlation function, so the prior of the correction `L α(x)` is the same in
+    /// every direction of the basis's span: no direction of the response is cheaper than
+    /// another, and the posterior mean corrects only what the observations see (the posterior
+    /// mean of `α(x)` lies in the row space of `B` at every input).
+    Isotropic,
 }
 
 /// Everything a calibration needs besides the model and the data, as a user writes it (TOML
@@ -599,6 +633,24 @@ impl CalibrationParams {
                 "marginal.level_variance",
                 format!("must be in [0, {MAX_LEVEL_VARIANCE:e}], got {c}"),
             ));
+        }
+        if let Some(f) = &self.marginal.fixed {
+            let ok = |v: f64| v.is_finite() && v > 0.0;
+            if !(ok(f.amplitude) && ok(f.length_scale_factor)) {
+                return Err(BamudiError::config(
+                    "marginal.fixed",
+                    format!(
+                        "amplitude and length_scale_factor must be finite and > 0, got {} and {}",
+                        f.amplitude, f.length_scale_factor
+                    ),
+                ));
+            }
+            if self.sigma_eps.is_none() {
+                return Err(BamudiError::config(
+                    "marginal.fixed",
+                    "holding the amplitude and length scales needs sigma_eps too",
+                ));
+            }
         }
         Ok(CalibrationConfig(self))
     }

@@ -119,7 +119,6 @@ fn batched_module3_nodes_equal_node_by_node_evaluation() {
             conditional: None,
         },
         factor: &factor,
-        sigma2: 1.0,
     };
     let nodes = [2.0, 5.5, 7.5, 12.0, 18.3, 24.9, 30.0];
     let batched = lik.log_posteriors_at_nodes(&nodes, &Silent).unwrap();
@@ -382,6 +381,7 @@ fn exact_estimator_without_noise_is_least_squares_when_b_has_full_column_rank() 
         mean_ag: vec![0.0; 7],
         mean_offset: vec![1.0; 7],
         alpha_half_width: vec![2.0, 0.5, 1.0, 3.0],
+        response_rms: 1.0,
     }];
     let y = DMatrix::from_row_slice(1, 7, &[1.0, 2.0, 0.0, -1.0, 3.0, 0.5, 1.5]);
     let got = est.predict(0.7, &DMatrix::zeros(1, 2), &y, &ctx).unwrap();
@@ -542,7 +542,7 @@ proptest! {
         let ag: Vec<f64> = pseudo_random(7, 1, seed + 2).iter().copied().collect();
         let off: Vec<f64> = pseudo_random(7, 1, seed + 3).iter().copied().collect();
         let y: Vec<f64> = (0..7).map(|p| rho * ag[p] + off[p] + (b.row(p) * &alpha)[(0, 0)]).collect();
-        let ctx = vec![XContext { mean_ag: ag, mean_offset: off, alpha_half_width: vec![1.0; 3] }];
+        let ctx = vec![XContext { mean_ag: ag, mean_offset: off, alpha_half_width: vec![1.0; 3], response_rms: 1.0 }];
         let got = est.predict(rho, &DMatrix::zeros(1, 2), &DMatrix::from_row_slice(1, 7, &y), &ctx).unwrap();
         let cond = b.clone().svd(false, false).singular_values;
         prop_assume!(cond.min() > 1e-3 * cond.max());

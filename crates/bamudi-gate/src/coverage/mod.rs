@@ -20,14 +20,21 @@
 //! The summaries carry exact (Clopper-Pearson) 95 % intervals of each coverage, and the 1 %
 //! binomial acceptance region of its nominal level.
 
+mod delta_file;
+mod drawn;
 mod markdown;
 mod merge;
 mod truth;
+
+pub use drawn::{DrawnDelta, GeneratingHyper};
+pub use truth::{DeltaFile, TrueDelta};
 
 pub use markdown::mode_label;
 pub use merge::{LogHeader, LoggedReplicate, ReplicateLog};
 pub use truth::{DiscrepancyShape, Truth};
 
+pub use crate::baselines::NormalTangential;
+use crate::baselines::{Baselines, ConditionForces, DeltaScore, ErrorTally, SeenSubspace};
 use crate::error::{GateAppError, Result};
 use crate::paper::{ForceRmse, build_gate, gate_model, prior_mean_response};
 use bamudi::module2::estimator::FittedEstimator;
@@ -90,6 +97,17 @@ pub struct CoverageOptions {
     pub gauge_noise_sd: f64,
     /// The shape of the true discrepancy (the paper's Eq. 53-54 by default).
     pub discrepancy: DiscrepancyShape,
+    /// The factor on the shape (1: its stated magnitude).
+    #[serde(default = "one")]
+    pub discrepancy_scale: f64,
+    /// A user's true discrepancy ([`DeltaFile`]) in place of the shape.
+    #[serde(default)]
+    pub discrepancy_file: Option<std::path::PathBuf>,
+    /// Simulation-based calibration: `θ`, `ρ` and the discrepancy all drawn per replicate
+    /// from the calibration's stated prior (`None`: `ρ` is the scenario's and the discrepancy
+    /// the shape or file above).
+    #[serde(default)]
+    pub sbc: Option<SbcOptions>,
     /// The coefficients' prior of the marginal mode.
     pub marginal: MarginalPrior,
     /// The prior range of `ρ` (the sampling rule's `rho_range`); `None` keeps the default.
@@ -123,6 +141,9 @@ impl CoverageOptions {
             mesh_element_size: None,
             gauge_noise_sd: 1.0,
             discrepancy: DiscrepancyShape::Paper,
+            discrepancy_scale: 1.0,
+            discrepancy_file: None,
+            sbc: None,
             marginal: MarginalPrior::default(),
             rho_range: None,
             threads: 0,
@@ -162,8 +183,35 @@ impl CoverageOptions {
         if let Some(s) = self.scenarios.iter().find(|s| !matches!(s, 1 | 2)) {
             return bad("scenarios", &format!("unknown scenario {s} (1 or 2)"));
         }
+        if self.sbc.is_some()
+            && (self.modes != [CoefficientMode::Marginal]
+                || self.marginal.scales != bamudi::CoefficientScales::Isotropic)
+        {
+            return bad(
+                "sbc",
+                "draws from the marginal mode's isotropic prior: modes must be `marginal` and \
+                 scales `isotropic`",
+            );
+        }
+        if !(self.discrepancy_scale.is_finite()) {
+            return bad("discrepancy scale", "must be finite");
+        }
         Ok(())
     }
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// Simulation-based calibration's settings ([`CoverageOptions::sbc`]).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct SbcOptions {
+    /// The hyper-parameters the discrepancy and the noise are drawn with.
+    pub hyper: GeneratingHyper,
+    /// Hold them in the calibration (`true`: the exact-inference check) or let the calibration
+    /// estimate them as the product does (`false`).
+    pub hold: bool,
 }
 
 /// One replicate under one coefficient mode.
@@ -205,8 +253,46 @@ pub struct Replicate {
     /// `None` in reports saved before it was measured.
     #[serde(default)]
     pub band_halfwidth: Option<NormalTangential>,
+    /// The force RMSE of every baseline and oracle ([`crate::baselines`]; `None` in reports
+    /// saved before they were measured).
+    #[serde(default)]
+    pub baselines: Option<Baselines>,
+    /// The reconstructed discrepancy against the true one in the truth's split.
+    #[serde(default)]
+    pub delta: Option<DeltaScore>,
+    /// The calibration's identified `ρ⊥` (mean, sd; marginal mode).
+    #[serde(default)]
+    pub rho_projection: Option<[f64; 2]>,
+    /// The truth's `ρ⊥` at the replicate's experiments.
+    #[serde(default)]
+    pub rho_projection_true: Option<f64>,
+    /// The marginal mode's fitted hyper-parameters: amplitude `s`, length-scale factor and
+    /// `σ_ε` (µε).
+    #[serde(default)]
+    pub hyper: Option<[f64; 3]>,
+    /// The truth's place in more posteriors than `θ`'s ([`Ranks`]; `None` in reports saved
+    /// before they were measured).
+    #[serde(default)]
+    pub ranks: Option<Ranks>,
     /// Seconds for the calibration and its scores.
     pub seconds: f64,
+}
+
+/// The posterior CDF at the truth (a PIT, uniform when the calibration is exact) of the
+/// quantities simulation-based calibration ranks besides `θ`.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct Ranks {
+    /// `P(ρ ≤ ρ* | y)` (marginal mode: the mixture over the `θ` nodes of Gaussians with `ρ`'s
+    /// conditional moments; `None` in the modular modes).
+    pub rho: Option<f64>,
+    /// The normal force at location A (a quarter of the quoin height) at the first new
+    /// condition: the fraction of joint posterior draws below the truth.
+    pub force: f64,
+    /// The quoin-block damage rate at the truth's hot spot (its most damaged point) at the
+    /// first new condition: the fraction of draws below the truth (`None` without damage).
+    pub damage: Option<f64>,
+    /// `(mean − truth)/sd` of the force at location A over the draws.
+    pub force_z: f64,
 }
 
 /// A coverage with its exact interval and the acceptance region of its nominal level.
@@ -236,15 +322,6 @@ impl LevelCoverage {
             acceptance: binomial_acceptance(c.n, c.level, ACCEPTANCE_ALPHA)?,
         })
     }
-}
-
-/// Normal and tangential values.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
-pub struct NormalTangential {
-    /// Normal force.
-    pub normal: f64,
-    /// Tangential force.
-    pub tangential: f64,
 }
 
 /// Summary of one scenario under one coefficient mode (the `--json` schema's entries).
@@ -288,12 +365,173 @@ pub struct ScenarioCoverage {
     pub force_band_halfwidth_ratio_median: Option<NormalTangential>,
     /// Root mean square of `(mean − θ*)/sd` (1 for a calibrated Gaussian posterior).
     pub z_rms: f64,
+    /// Mean and standard deviation of `(mean − θ*)/sd` (0 and 1 when calibrated; `[0, 0]` in
+    /// reports saved before they were kept).
+    #[serde(default)]
+    pub z_mean_sd: [f64; 2],
+    /// The corrected force against the baselines and oracles, and the identified `ρ⊥`
+    /// against the truth's (`None` when a replicate did not measure them).
+    #[serde(default)]
+    pub correction: Option<CorrectionSummary>,
+    /// Rank uniformity and z of every ranked quantity (`θ`, `ρ`, the force at location A, the
+    /// hot spot's damage; `None` when a replicate did not rank them).
+    #[serde(default)]
+    pub ranked: Option<Vec<RankSummary>>,
     /// Median posterior sd of `θ` (in).
     pub theta_sd_median: f64,
     /// Wall time of this scenario and mode (s, summed over replicates).
     pub seconds: f64,
     /// Every replicate.
     pub replicates: Vec<Replicate>,
+}
+
+/// The corrected force against the baselines and oracles over the replicates (medians over
+/// replicates of each replicate's RMSE over conditions and points; [`crate::baselines`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CorrectionSummary {
+    /// Median RMSE of each baseline (lbf/in).
+    pub baselines: Baselines,
+    /// Median of (c) / (b): the correction against the best fit without a discrepancy.
+    pub vs_no_discrepancy: NormalTangential,
+    /// Median of (c) / (e): the correction against the seen-subspace oracle.
+    pub vs_oracle_seen: NormalTangential,
+    /// Median of `δ̂` RMSE / true `δ` RMS (truth's split; `NaN` where the truth has no `δ`).
+    pub delta_ratio: NormalTangential,
+    /// Median RMSE of `δ̂` against the true `δ` (lbf/in).
+    pub delta_rmse: NormalTangential,
+    /// Median of the mean 95 % band half-width / true `δ` RMS: how wide the band is against
+    /// what it is meant to resolve (`NaN` without a true `δ`).
+    pub halfwidth_over_delta: NormalTangential,
+    /// `ρ⊥` against the truth's `ρ⊥` (modes that report it).
+    pub rho_projection: Option<RhoCheck>,
+}
+
+/// The ranks of one quantity over the replicates.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RankSummary {
+    /// `theta`, `rho`, `force at A`, `hot-spot damage`.
+    pub quantity: String,
+    /// Replicates ranked.
+    pub n: usize,
+    /// The rank histogram ([`RANK_BINS`] bins).
+    pub histogram: Vec<usize>,
+    /// p-value of its χ² uniformity test.
+    pub uniformity_p: f64,
+    /// Mean and sd of `(posterior mean − truth)/posterior sd` (`None` where no sd is kept).
+    pub z_mean_sd: Option<[f64; 2]>,
+}
+
+/// [`RankSummary`] of each ranked quantity, if every replicate ranked them.
+fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
+    let ranks: Option<Vec<Ranks>> = reps.iter().map(|r| r.ranks).collect();
+    let Some(ranks) = ranks.filter(|v| !v.is_empty()) else {
+        return Ok(None);
+    };
+    let mean_sd = |z: &[f64]| -> Option<[f64; 2]> {
+        if z.is_empty() {
+            return None;
+        }
+        let n = z.len() as f64;
+        let m = z.iter().sum::<f64>() / n;
+        Some([
+            m,
+            (z.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n).sqrt(),
+        ])
+    };
+    let theta_z: Vec<f64> = reps
+        .iter()
+        .map(|r| (r.theta_mean - r.theta_true) / r.theta_sd)
+        .collect();
+    let rho_z: Vec<f64> = reps
+        .iter()
+        .filter_map(|r| Some((r.rho - r.rho_true?) / r.rho_sd?))
+        .collect();
+    let force_z: Vec<f64> = ranks.iter().map(|r| r.force_z).collect();
+    let columns: [(&str, Vec<f64>, Option<[f64; 2]>); 4] = [
+        (
+            "theta",
+            reps.iter().map(|r| r.pit).collect(),
+            mean_sd(&theta_z),
+        ),
+        (
+            "rho",
+            ranks.iter().filter_map(|r| r.rho).collect(),
+            mean_sd(&rho_z),
+        ),
+        (
+            "force at A",
+            ranks.iter().map(|r| r.force).collect(),
+            mean_sd(&force_z),
+        ),
+        (
+            "hot-spot damage",
+            ranks.iter().filter_map(|r| r.damage).collect(),
+            None,
+        ),
+    ];
+    let mut out = Vec::new();
+    for (quantity, pits, z) in columns {
+        if pits.len() < 2 {
+            continue;
+        }
+        let hist = RankHistogram::new(&pits, RANK_BINS)?;
+        out.push(RankSummary {
+            quantity: quantity.into(),
+            n: pits.len(),
+            histogram: hist.counts,
+            uniformity_p: hist.p_value,
+            z_mean_sd: z,
+        });
+    }
+    Ok(Some(out))
+}
+
+/// [`CorrectionSummary`] if every replicate measured the baselines.
+fn correction_summary(reps: &[Replicate]) -> Result<Option<CorrectionSummary>> {
+    let all: Option<Vec<(Baselines, DeltaScore, NormalTangential)>> = reps
+        .iter()
+        .map(|r| Some((r.baselines?, r.delta?, r.band_halfwidth?)))
+        .collect();
+    let Some(all) = all.filter(|v| !v.is_empty()) else {
+        return Ok(None);
+    };
+    let med = |f: &dyn Fn(&(Baselines, DeltaScore, NormalTangential)) -> NormalTangential| {
+        NormalTangential {
+            normal: median(all.iter().map(|v| f(v).normal)),
+            tangential: median(all.iter().map(|v| f(v).tangential)),
+        }
+    };
+    let ratio = |a: NormalTangential, b: NormalTangential| NormalTangential {
+        normal: a.normal / b.normal,
+        tangential: a.tangential / b.tangential,
+    };
+    let rho: Vec<(f64, f64, f64)> = reps
+        .iter()
+        .filter_map(|r| match (r.rho_projection, r.rho_projection_true) {
+            (Some([m, sd]), Some(t)) if sd > 0.0 => Some((m, sd, t)),
+            _ => None,
+        })
+        .collect();
+    Ok(Some(CorrectionSummary {
+        baselines: Baselines {
+            prior_mean: med(&|v| v.0.prior_mean),
+            no_discrepancy: med(&|v| v.0.no_discrepancy),
+            calibrated: med(&|v| v.0.calibrated),
+            oracle_split: med(&|v| v.0.oracle_split),
+            oracle_seen: med(&|v| v.0.oracle_seen),
+            theta_spread: med(&|v| v.0.theta_spread),
+            oracle_seen_posterior: med(&|v| v.0.oracle_seen_posterior),
+        },
+        vs_no_discrepancy: med(&|v| ratio(v.0.calibrated, v.0.no_discrepancy)),
+        vs_oracle_seen: med(&|v| ratio(v.0.calibrated, v.0.oracle_seen)),
+        delta_ratio: med(&|v| ratio(v.1.rmse, v.1.true_rms)),
+        delta_rmse: med(&|v| v.1.rmse),
+        halfwidth_over_delta: med(&|v| ratio(v.2, v.1.true_rms)),
+        rho_projection: z_check(
+            rho.iter().map(|(m, sd, t)| (m - t) / sd).collect(),
+            rho.iter().map(|r| r.1),
+        )?,
+    }))
 }
 
 /// `ρ`'s posterior against the true `ρ` over the replicates, with the Gaussian approximation
@@ -326,6 +564,11 @@ fn rho_check(reps: &[Replicate]) -> Result<Option<RhoCheck>> {
             _ => None,
         })
         .collect();
+    z_check(z, reps.iter().filter_map(|r| r.rho_sd))
+}
+
+/// [`RhoCheck`] from the z values `(mean − truth)/sd` and the posterior sds (`None` if no z).
+fn z_check(z: Vec<f64>, sds: impl Iterator<Item = f64>) -> Result<Option<RhoCheck>> {
     if z.is_empty() {
         return Ok(None);
     }
@@ -340,7 +583,7 @@ fn rho_check(reps: &[Replicate]) -> Result<Option<RhoCheck>> {
         })?,
         z_mean: mean(&|v| v),
         z_rms: mean(&|v| v * v).sqrt(),
-        sd_median: median(reps.iter().filter_map(|r| r.rho_sd)),
+        sd_median: median(sds),
     }))
 }
 
@@ -406,6 +649,7 @@ struct Setup<'a> {
     number: u8,
     model: GateMultiLevel,
     opts: &'a CoverageOptions,
+    file: Option<std::sync::Arc<DeltaFile>>,
 }
 
 /// Every replicate of one scenario (per replicate, one result per mode).
@@ -416,11 +660,19 @@ fn scenario_replicates(
     on_replicate: OnReplicate,
 ) -> Result<Vec<Vec<Replicate>>> {
     let prior = Scenario::paper(number)?.prior;
+    let file = match &opts.discrepancy_file {
+        None => None,
+        Some(path) => Some(std::sync::Arc::new(DeltaFile::read(
+            path,
+            contact.gate().quoin_height,
+        )?)),
+    };
     let setup = Setup {
         contact,
         number,
         model: gate_model(contact, prior)?,
         opts,
+        file,
     };
     // the first replicate fits the estimator the others reuse
     let start = opts.first_replicate;
@@ -440,28 +692,58 @@ fn scenario_replicates(
 }
 
 impl Setup<'_> {
-    /// The replicate's truth (`θ*` from the prior), its data and new conditions.
-    fn truth(&self, r: usize) -> Result<(Truth, bamudi::Experiments, Vec<[f64; 2]>)> {
+    /// The replicate's truth (`θ*` from the prior; with SBC `ρ` and `δ` too), its data, new
+    /// conditions and the truth's `ρ⊥` at the experiments.
+    fn truth(&self, r: usize) -> Result<(Truth, bamudi::Experiments, Vec<[f64; 2]>, f64)> {
         let base = derive_seed(self.opts.seed, 1000 * self.number as u64 + r as u64);
         let scenario = Scenario::paper(self.number)?;
         let (lo, hi) = scenario.prior;
-        let truth = Truth {
-            theta: lo + (hi - lo) * unit_uniform(derive_seed(base, 1)),
-            rho: scenario.rho,
-            shape: self.opts.discrepancy,
-        };
+        let theta = lo + (hi - lo) * unit_uniform(derive_seed(base, 1));
         let levels = sample_levels(self.opts.n_experiments, derive_seed(base, 2));
-        let y = truth.strains(
-            self.contact,
-            &levels,
-            self.opts.gauge_noise_sd,
-            derive_seed(base, 4),
-        )?;
+        let new_x = sample_levels(self.opts.new_conditions, derive_seed(base, 3));
+        let (rho, delta, noise_sd) = match &self.opts.sbc {
+            Some(sbc) => {
+                let (r_lo, r_hi) = self.rho_range();
+                let rho = r_lo + (r_hi - r_lo) * unit_uniform(derive_seed(base, 5));
+                let inputs: Vec<[f64; 2]> = levels.iter().chain(&new_x).copied().collect();
+                let drawn = DrawnDelta::draw(
+                    &self.model,
+                    self.contact,
+                    theta,
+                    0.5 * (lo + hi),
+                    &levels,
+                    &inputs,
+                    &sbc.hyper,
+                    derive_seed(base, 6),
+                )?;
+                let delta = TrueDelta::Drawn(std::sync::Arc::new(drawn));
+                (rho, delta, sbc.hyper.noise_sd)
+            }
+            None => {
+                let delta = match &self.file {
+                    Some(f) => TrueDelta::File(f.clone()),
+                    None => TrueDelta::Shape {
+                        shape: self.opts.discrepancy,
+                        scale: self.opts.discrepancy_scale,
+                    },
+                };
+                (scenario.rho, delta, self.opts.gauge_noise_sd)
+            }
+        };
+        let truth = Truth { theta, rho, delta };
+        let y = truth.strains(self.contact, &levels, noise_sd, derive_seed(base, 4))?;
         let x = nalgebra::DMatrix::from_fn(levels.len(), 2, |i, j| levels[i][j]);
         let gauges = (1..=y.ncols()).map(|g| format!("g{g}")).collect();
         let exps = bamudi::Experiments::new(vec!["h_up".into(), "h_down".into()], gauges, x, y)?;
-        let new_x = sample_levels(self.opts.new_conditions, derive_seed(base, 3));
-        Ok((truth, exps, new_x))
+        let rho_perp = truth.projection_rho(self.contact, &levels)?;
+        Ok((truth, exps, new_x, rho_perp))
+    }
+
+    /// `ρ`'s prior range (the sampling rule's).
+    fn rho_range(&self) -> (f64, f64) {
+        self.opts
+            .rho_range
+            .unwrap_or(SamplingRule::default().rho_range)
     }
 
     fn params(&self, mode: CoefficientMode, r: usize) -> CalibrationParams {
@@ -469,13 +751,24 @@ impl Setup<'_> {
         if let Some((lo, hi)) = self.opts.rho_range {
             sampling = sampling.rho_range(lo, hi);
         }
+        let mut marginal = self.opts.marginal.clone();
+        let mut sigma_eps = None;
+        if let Some(sbc) = self.opts.sbc.filter(|s| s.hold) {
+            marginal.fixed = Some(bamudi::params::FixedHyper {
+                amplitude: sbc.hyper.amplitude,
+                length_scale_factor: sbc.hyper.length_scale_factor,
+            });
+            marginal.level_variance = sbc.hyper.level_variance;
+            sigma_eps = Some(sbc.hyper.noise_sd);
+        }
         CalibrationParams::default()
             .estimator(self.opts.estimator.clone())
             .training_size(self.opts.training_size)
             .theta_grid_points(self.opts.theta_grid_points)
             .sampling(sampling)
             .coefficients(mode)
-            .marginal(self.opts.marginal.clone())
+            .marginal(marginal)
+            .sigma_eps(sigma_eps)
             .seed(derive_seed(self.opts.seed, 7 + r as u64))
     }
 
@@ -485,7 +778,7 @@ impl Setup<'_> {
         r: usize,
         estimator: Option<&(FittedEstimator, usize)>,
     ) -> Result<(Vec<Replicate>, (FittedEstimator, usize))> {
-        let (truth, exps, new_x) = self.truth(r)?;
+        let (truth, exps, new_x, rho_perp) = self.truth(r)?;
         let mut fitted = estimator.cloned();
         let mut out = Vec::new();
         for &mode in &self.opts.modes {
@@ -505,6 +798,7 @@ impl Setup<'_> {
             let seed = derive_seed(self.opts.seed, 5000 + r as u64);
             let mut rep = self.score(&cal, &truth, &new_x, seed)?;
             (rep.index, rep.seconds) = (r, t.elapsed().as_secs_f64());
+            rep.rho_projection_true = Some(rho_perp);
             out.push(rep);
         }
         let fitted = fitted.ok_or_else(|| GateAppError::Option("coverage: no mode ran".into()))?;
@@ -529,6 +823,8 @@ impl Setup<'_> {
             self.contact.gate().nu_points.clone(),
         )?;
         let mut tally = BandTally::default();
+        let mut errors = ErrorTally::default();
+        let seen = SeenSubspace::new(&self.model, self.contact, truth.theta)?;
         let mut fatigue = (0usize, 0usize);
         for (k, x) in new_x.iter().enumerate() {
             let truth_f = truth.forces(self.contact, *x)?;
@@ -537,9 +833,25 @@ impl Setup<'_> {
             for p in 0..2 * nu {
                 tally.add(p < nu, truth_f[p], before[p], &band, p);
             }
+            let forces = ConditionForces {
+                truth: &truth_f,
+                model_part: &truth.model_part(self.contact, *x)?,
+                model_part_posterior: &crate::paper::score::posterior_model_part(
+                    &predictor, truth.rho, x,
+                )?,
+                prior_mean: &before,
+                no_discrepancy: &predictor.no_discrepancy_response(x)?.mean,
+                calibrated: &band.mean,
+                delta_hat: &predictor.discrepancy(x)?.mean,
+            };
+            errors.add_condition(&forces, &seen, nu);
             let hits = fatigue_hits(&predictor, &block, x, &truth_f, derive_seed(seed, k as u64))?;
             fatigue = (fatigue.0 + hits.0, fatigue.1 + hits.1);
         }
+        let ranks = match new_x.first() {
+            Some(x0) => Some(self.ranks(cal, &predictor, &block, truth, *x0, seed)?),
+            None => None,
+        };
         let s = post.summary(0);
         Ok(Replicate {
             index: 0,
@@ -555,9 +867,95 @@ impl Setup<'_> {
             band_fatigue: Some(fatigue.0 as f64 / fatigue.1.max(1) as f64),
             force_rmse: tally.rmse(),
             band_halfwidth: Some(tally.halfwidth()),
+            baselines: Some(errors.baselines()),
+            delta: Some(errors.delta()),
+            rho_projection: cal.module3().marginal.as_ref().map(|m| m.rho_projection),
+            rho_projection_true: None,
+            hyper: cal
+                .module3()
+                .marginal
+                .as_ref()
+                .map(|m| [m.amplitude, m.length_scale_factor, cal.sigma_eps()]),
+            ranks,
             seconds: 0.0,
         })
     }
+
+    /// [`Ranks`] at the condition `x`.
+    fn ranks<U: UnobservableModel, O: LinearObservableModel>(
+        &self,
+        cal: &Calibration,
+        predictor: &bamudi::Predictor<'_, U, O>,
+        block: &QuoinBlockModel,
+        truth: &Truth,
+        x: [f64; 2],
+        seed: u64,
+    ) -> Result<Ranks> {
+        let rho = cal.module3().marginal.as_ref().map(|m| {
+            let w: f64 = m.nodes.iter().map(|n| n.weight).sum::<f64>().max(1e-300);
+            m.nodes
+                .iter()
+                .map(|n| {
+                    let sd = n.rho_var.sqrt().max(1e-300);
+                    n.weight * normal_cdf((truth.rho - n.rho_mean) / sd)
+                })
+                .sum::<f64>()
+                / w
+        });
+        let truth_f = truth.forces(self.contact, x)?;
+        let gate = self.contact.gate();
+        let a = location_a(gate);
+        let draws = predictor.response_draws(&x, FATIGUE_DRAWS, derive_seed(seed, 99))?;
+        let below = |values: &[f64], t: f64| {
+            let n = values.len().max(1) as f64;
+            let (lt, eq) = values.iter().fold((0usize, 0usize), |(lt, eq), v| {
+                (lt + usize::from(*v < t), eq + usize::from(*v == t))
+            });
+            (lt as f64 + 0.5 * eq as f64) / n
+        };
+        let forces: Vec<f64> = draws.iter().map(|d| d.response[a]).collect();
+        let mean = forces.iter().sum::<f64>() / forces.len().max(1) as f64;
+        let sd = (forces.iter().map(|f| (f - mean).powi(2)).sum::<f64>()
+            / forces.len().max(2).saturating_sub(1) as f64)
+            .sqrt();
+        let nu = gate.n_points();
+        let mut damage_truth = vec![0.0; 4 * nu];
+        block.evaluate(&x, &[0.0], &truth_f, &mut damage_truth)?;
+        let hot = (3 * nu..4 * nu).max_by(|&i, &j| damage_truth[i].total_cmp(&damage_truth[j]));
+        let damage = match hot.filter(|&h| damage_truth[h] > 0.0) {
+            None => None,
+            Some(h) => {
+                let mut out = vec![0.0; 4 * nu];
+                let values = draws
+                    .iter()
+                    .map(|d| {
+                        block.evaluate(&x, &d.theta, &d.response, &mut out)?;
+                        Ok(out[h])
+                    })
+                    .collect::<Result<Vec<_>>>()?;
+                Some(below(&values, damage_truth[h]))
+            }
+        };
+        Ok(Ranks {
+            rho,
+            force: below(&forces, truth_f[a]),
+            damage,
+            force_z: (mean - truth_f[a]) / sd.max(1e-300),
+        })
+    }
+}
+
+/// The quoin point of location A: the first at or above a quarter of the quoin height (the
+/// paper's Fig. 10 marks A low on the quoin, above the gap, where the bearing force is
+/// largest).
+pub fn location_a(gate: &mitergate::CondensedGate) -> usize {
+    gate.nu_points
+        .partition_point(|&z| z < 0.25 * gate.quoin_height)
+}
+
+/// The standard normal CDF.
+fn normal_cdf(z: f64) -> f64 {
+    0.5 * statrs::function::erf::erfc(-z / std::f64::consts::SQRT_2)
 }
 
 /// Joint force draws per condition behind the fatigue band (its 2.5 % quantile lies between
@@ -686,6 +1084,13 @@ fn summarise(
         },
         force_band_halfwidth_ratio_median: halfwidth_ratio(&reps),
         z_rms: mean(&|r| ((r.theta_mean - r.theta_true) / r.theta_sd).powi(2)).sqrt(),
+        z_mean_sd: {
+            let z = |r: &Replicate| (r.theta_mean - r.theta_true) / r.theta_sd;
+            let m = mean(&z);
+            [m, mean(&|r| (z(r) - m).powi(2)).sqrt()]
+        },
+        correction: correction_summary(&reps)?,
+        ranked: rank_summaries(&reps)?,
         theta_sd_median: median(reps.iter().map(|r| r.theta_sd)),
         seconds: reps.iter().map(|r| r.seconds).sum(),
         replicates: reps,
@@ -765,6 +1170,12 @@ mod tests {
                 tangential_after: 1.0,
             },
             band_halfwidth: None,
+            baselines: None,
+            delta: None,
+            rho_projection: None,
+            rho_projection_true: None,
+            hyper: None,
+            ranks: None,
             seconds: 0.0,
         }
     }

@@ -2,12 +2,15 @@
 //! discrepancy whose shape is chosen, none of which the calibration's discrepancy basis
 //! contains exactly.
 
+pub use super::delta_file::DeltaFile;
+pub use super::drawn::DrawnDelta;
 use crate::error::Result;
 use mitergate::ContactModel;
 use mitergate::data::truth::true_discrepancy;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// The shape of the true discrepancy `δ(x)` along the quoin (lbf/in).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -81,26 +84,111 @@ impl DiscrepancyShape {
     }
 }
 
+/// The true discrepancy of one replicate.
+#[derive(Debug, Clone)]
+pub enum TrueDelta {
+    /// A shape of the library times a factor (1: its stated magnitude).
+    Shape {
+        /// The shape.
+        shape: DiscrepancyShape,
+        /// The factor.
+        scale: f64,
+    },
+    /// A user's discrepancy, given as a table or as coefficients ([`DeltaFile`]).
+    File(Arc<DeltaFile>),
+    /// Drawn from the calibration's own prior at the replicate's inputs ([`DrawnDelta`]):
+    /// simulation-based calibration.
+    Drawn(Arc<DrawnDelta>),
+}
+
+impl TrueDelta {
+    /// `δ` at levels `x` (in) on the quoin points of `contact`'s gate for the gap `theta_star`
+    /// (in), component blocked (lbf/in).
+    pub fn delta(&self, contact: &ContactModel, x: [f64; 2], theta_star: f64) -> Result<Vec<f64>> {
+        match self {
+            Self::Shape { shape, scale } => {
+                let mut d = shape.delta(contact, x, theta_star);
+                d.iter_mut().for_each(|v| *v *= scale);
+                Ok(d)
+            }
+            Self::File(f) => f.delta(contact, x, theta_star),
+            Self::Drawn(d) => d.delta(x),
+        }
+    }
+
+    /// A short name for reports: `paper`, `paper x2`, `file gate-delta.csv`, `drawn from the
+    /// prior`.
+    pub fn label(&self) -> String {
+        match self {
+            Self::Shape { shape, scale } => {
+                let name = serde_json::to_value(shape)
+                    .ok()
+                    .and_then(|v| v.as_str().map(String::from))
+                    .unwrap_or_default();
+                match *scale == 1.0 {
+                    true => name,
+                    false => format!("{name} x{scale}"),
+                }
+            }
+            Self::File(f) => format!("file {}", f.name),
+            Self::Drawn(_) => "drawn from the calibration's prior".into(),
+        }
+    }
+}
+
 /// One replicate's reality.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct Truth {
     /// `θ*` (in).
     pub theta: f64,
     /// `ρ`.
     pub rho: f64,
-    /// The discrepancy's shape.
-    pub shape: DiscrepancyShape,
+    /// The true discrepancy.
+    pub delta: TrueDelta,
 }
 
 impl Truth {
+    /// A truth with a library shape at its stated magnitude.
+    pub fn new(theta: f64, rho: f64, shape: DiscrepancyShape) -> Self {
+        Self {
+            theta,
+            rho,
+            delta: TrueDelta::Shape { shape, scale: 1.0 },
+        }
+    }
+
     /// The true quoin forces `ρ g(x, θ*) + δ(x)` (lbf/in, blocked).
     pub fn forces(&self, contact: &ContactModel, x: [f64; 2]) -> Result<Vec<f64>> {
         let mut f = contact.solve(x[0], x[1], self.theta)?.forces;
-        let delta = self.shape.delta(contact, x, self.theta);
+        let delta = self.delta.delta(contact, x, self.theta)?;
         f.iter_mut()
             .zip(&delta)
             .for_each(|(f, d)| *f = self.rho * *f + d);
         Ok(f)
+    }
+
+    /// The truth's model part `ρ g(x, θ*)` (lbf/in, blocked): the true forces without the
+    /// discrepancy.
+    pub fn model_part(&self, contact: &ContactModel, x: [f64; 2]) -> Result<Vec<f64>> {
+        let mut f = contact.solve(x[0], x[1], self.theta)?.forces;
+        f.iter_mut().for_each(|f| *f *= self.rho);
+        Ok(f)
+    }
+
+    /// The truth's identified `ρ⊥` at the experiments `levels`: `Σ aᵀ A F / Σ aᵀa` with
+    /// `a = A g(x_i, θ*)` and `F` the true forces, the value a calibration's
+    /// [`bamudi::module3::marginal::MarginalFit::rho_projection`] estimates (noise-free).
+    pub fn projection_rho(&self, contact: &ContactModel, levels: &[[f64; 2]]) -> Result<f64> {
+        let a_mat = &contact.gate().a_matrix;
+        let (mut num, mut den) = (0.0, 0.0);
+        for x in levels {
+            let g = nalgebra::DVector::from_vec(contact.solve(x[0], x[1], self.theta)?.forces);
+            let f = nalgebra::DVector::from_vec(self.forces(contact, *x)?);
+            let (ag, af) = (a_mat * g, a_mat * f);
+            num += ag.dot(&af);
+            den += ag.dot(&ag);
+        }
+        Ok(num / den.max(1e-300))
     }
 
     /// Measured strains (microstrain, `levels.len() x N_o`) with gauge noise of sd
@@ -139,11 +227,7 @@ mod tests {
             .build(mitergate::testing::doc_gate())
             .unwrap();
         let x = [700.0, 50.0];
-        let truth = |shape| Truth {
-            theta: 95.25,
-            rho: 0.8,
-            shape,
-        };
+        let truth = |shape| Truth::new(95.25, 0.8, shape);
         let paper = truth(DiscrepancyShape::Paper).forces(&contact, x).unwrap();
         let cell = truth(DiscrepancyShape::PaperCell)
             .forces(&contact, x)

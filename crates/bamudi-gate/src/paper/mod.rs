@@ -28,6 +28,7 @@ mod sensitivity;
 
 pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rules};
 
+use crate::baselines::Baselines;
 use crate::error::Result;
 use crate::gate::ROW_MEMO_CAPACITY;
 use bamudi::closeloop::ThetaSummary;
@@ -245,6 +246,13 @@ pub struct ConditionalResult {
     /// The reconstructed discrepancy against the true one.
     #[serde(default)]
     pub discrepancy: DiscrepancyScore,
+    /// The corrected force beside every baseline and oracle ([`crate::baselines`]; absent in
+    /// reports written before they were measured).
+    #[serde(default)]
+    pub baselines: Option<Baselines>,
+    /// The identified `ρ⊥` (mean, sd; marginal mode).
+    #[serde(default)]
+    pub rho_projection: Option<[f64; 2]>,
 }
 
 /// Everything reported for one scenario (the `--json` schema of the README).
@@ -274,6 +282,12 @@ pub struct ScenarioResult {
     /// The reconstructed discrepancy against the true one (the paper's Module 3).
     #[serde(default)]
     pub discrepancy: DiscrepancyScore,
+    /// The paper's Module 3 beside every baseline and oracle ([`crate::baselines`]).
+    #[serde(default)]
+    pub baselines: Option<Baselines>,
+    /// The truth's `ρ⊥` at the experiments (the value the calibrations' `ρ⊥` estimates).
+    #[serde(default)]
+    pub rho_projection_true: Option<f64>,
     /// The estimator of Eq. 29 on held-out samples of its training distribution (Fig. 12).
     #[serde(default)]
     pub estimator_accuracy: EstimatorAccuracy,
@@ -435,6 +449,8 @@ fn run_variant(
         seconds,
         rho_sd: cond.module3().marginal.as_ref().map(|m| m.rho_sd),
         discrepancy: scores.discrepancy,
+        baselines: Some(scores.baselines),
+        rho_projection: cond.module3().marginal.as_ref().map(|m| m.rho_projection),
     };
     Ok((result, cond))
 }
@@ -470,6 +486,22 @@ impl<'a> ScenarioRun<'a> {
             model,
             new_x,
         })
+    }
+
+    /// The truth's `ρ⊥` at the experiments: `Σ aᵀ A F / Σ aᵀa`, `a = A g(x_i, θ*)`.
+    fn projection_rho(&self) -> Result<f64> {
+        let no_delta = self.scenario.clone().discrepancy_scale(0.0);
+        let gate = self.contact.gate();
+        let (mut num, mut den) = (0.0, 0.0);
+        for (x, f) in self.truth.x.iter().zip(&self.truth.true_forces) {
+            let g = truth::true_forces(&no_delta, self.contact, *x)?;
+            let ag = &gate.a_matrix * DVector::from_column_slice(&g);
+            let af = &gate.a_matrix * DVector::from_column_slice(f);
+            num += ag.dot(&af);
+            den += ag.dot(&ag);
+        }
+        // `g` here carries the truth's ρ: divide it out
+        Ok(self.scenario.rho * num / den.max(1e-300))
     }
 
     /// RMS over experiments and gauges of the true discrepancy's strain `A δ`.
@@ -566,6 +598,8 @@ pub fn run_scenario(
         discrepancy_strain_rms,
         sigma_eps: cal.sigma_eps(),
         discrepancy: scores.discrepancy.clone(),
+        baselines: Some(scores.baselines),
+        rho_projection_true: Some(s.projection_rho()?),
         estimator_accuracy: accuracy,
         timings_s: ScenarioTimings {
             module2: tm.module2_s(),

@@ -1,12 +1,12 @@
 //! Scoring a calibration against the synthetic truth (only here, never inside a calibration).
 
 use super::{ForceRmse, StrainRmse};
+use crate::baselines::{Baselines, ConditionForces, ErrorTally, SeenSubspace};
 use crate::error::Result;
-use bamudi::{Band, Calibration, SupportPolicy};
+use bamudi::{Band, Calibration};
 use mitergate::data::truth::{self, Scenario};
 use mitergate::{ContactModel, GateMultiLevel};
-use mlmodel::{LinearObservableModel, ObservableModel, UnobservableModel};
-use nalgebra::DVector;
+use mlmodel::{LinearObservableModel, UnobservableModel};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -51,24 +51,12 @@ fn weighted_response(
     Ok(acc)
 }
 
-/// Strains `A g + s_w` of the no-discrepancy calibration, averaged over its θ posterior.
-fn no_discrepancy_strain(model: &GateMultiLevel, cal: &Calibration, x: &[f64]) -> Result<Vec<f64>> {
-    let support = cal
-        .module3()
-        .posterior_no_discrepancy
-        .support(&SupportPolicy::default());
-    let g = weighted_response(model, x, support.iter().map(|(t, w)| (t[0], *w)))?;
-    let mut b = vec![0.0; model.observable.output_dim()];
-    model.observable.offset(x, &[0.0], &mut b)?;
-    let s = model.observable.matrix() * DVector::from_vec(g) + DVector::from_vec(b);
-    Ok(s.iter().copied().collect())
-}
-
 /// Force and strain errors of one calibration at the new conditions.
 pub(super) struct Scores {
     pub(super) force: ForceRmse,
     pub(super) strain: StrainRmse,
     pub(super) discrepancy: DiscrepancyScore,
+    pub(super) baselines: Baselines,
 }
 
 /// The reconstructed discrepancy `δ̂ = L μ_α` against the true one (`f* − ρ* g(x, θ*)`, the
@@ -165,7 +153,8 @@ where
     })
 }
 
-/// Force RMSE before/after and strain RMSE with/without the discrepancy at `new_x`.
+/// Force RMSE before/after, strain RMSE with/without the discrepancy, and every baseline
+/// and oracle ([`crate::baselines`]) at `new_x`.
 pub(super) fn score(
     model: &GateMultiLevel,
     cal: &Calibration,
@@ -175,23 +164,41 @@ pub(super) fn score(
 ) -> Result<Scores> {
     let nu = contact.gate().n_points();
     let predictor = cal.predictor(model)?;
+    let no_delta = scenario.clone().discrepancy_scale(0.0);
+    let seen = SeenSubspace::new(model, contact, scenario.theta_true)?;
     // the conditions in parallel (contact solves), the errors collected in their order
     let per_x = new_x
         .par_iter()
         .map(|x| -> Result<_> {
             let truth_f = truth::true_forces(scenario, contact, *x)?;
+            let model_part = truth::true_forces(&no_delta, contact, *x)?;
             let before = prior_mean_response(model, x)?;
             let (after, _) = predictor.response_moments(x)?;
             let with = predictor.outputs(x)?.mean;
-            let without = no_discrepancy_strain(model, cal, x)?;
-            Ok((x, truth_f, before, after, with, without))
+            let without = predictor.no_discrepancy_outputs(x)?.mean;
+            let baseline = predictor.no_discrepancy_response(x)?.mean;
+            let delta_hat = predictor.discrepancy(x)?.mean;
+            let posterior_part = posterior_model_part(&predictor, scenario.rho, x)?;
+            Ok((
+                x,
+                truth_f,
+                model_part,
+                before,
+                after,
+                with,
+                without,
+                baseline,
+                delta_hat,
+                posterior_part,
+            ))
         })
         .collect::<Vec<_>>() // every condition first: an error is then the first in their order
         .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let (mut dn_b, mut dn_a, mut dt_b, mut dt_a) = (vec![], vec![], vec![], vec![]);
     let (mut ds_w, mut ds_wo) = (vec![], vec![]);
-    for (x, truth_f, before, after, with, without) in per_x {
+    let mut tally = ErrorTally::default();
+    for (x, truth_f, model_part, before, after, with, without, baseline, delta_hat, post) in per_x {
         for b in 0..2 * nu {
             let (eb, ea) = (before[b] - truth_f[b], after[b] - truth_f[b]);
             if b < nu {
@@ -202,6 +209,19 @@ pub(super) fn score(
                 dt_a.push(ea);
             }
         }
+        tally.add_condition(
+            &ConditionForces {
+                truth: &truth_f,
+                model_part: &model_part,
+                model_part_posterior: &post,
+                prior_mean: &before,
+                no_discrepancy: &baseline,
+                calibrated: &after,
+                delta_hat: &delta_hat,
+            },
+            &seen,
+            nu,
+        );
         let true_strain = contact.gate().strain(&truth_f, x[0], x[1]);
         for p in 0..true_strain.len() {
             ds_w.push(with[p] - true_strain[p]);
@@ -220,5 +240,23 @@ pub(super) fn score(
             without_discrepancy: rms(ds_wo.into_iter()),
         },
         discrepancy: discrepancy_score(&predictor, scenario, contact, new_x)?,
+        baselines: tally.baselines(),
     })
+}
+
+/// `ρ E[g(x, θ) | y]` over the predictor's `θ` support (lbf/in, blocked): the truth's model
+/// part at the calibration's `θ` posterior.
+pub(crate) fn posterior_model_part<U: UnobservableModel, O: LinearObservableModel>(
+    predictor: &bamudi::Predictor<'_, U, O>,
+    rho: f64,
+    x: &[f64; 2],
+) -> Result<Vec<f64>> {
+    let model = predictor.model();
+    let mut g = vec![0.0; model.unobservable.response_len()];
+    let mut acc = vec![0.0; g.len()];
+    for (theta, w) in predictor.support() {
+        model.unobservable.evaluate(x, theta, &mut g)?;
+        acc.iter_mut().zip(&g).for_each(|(a, v)| *a += rho * w * v);
+    }
+    Ok(acc)
 }

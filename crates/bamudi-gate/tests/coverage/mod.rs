@@ -263,11 +263,7 @@ impl AsBuiltSkin {
         use bamudi::{Calibrate, CalibrationParams, CoefficientMode, EstimatorParams};
         use bamudi_gate::coverage::{DiscrepancyShape, Truth};
         use mitergate::data::truth::sample_levels;
-        let truth = Truth {
-            theta,
-            rho: 0.8,
-            shape: DiscrepancyShape::Paper,
-        };
+        let truth = Truth::new(theta, 0.8, DiscrepancyShape::Paper);
         let levels = sample_levels(60, seed);
         let y = truth
             .strains(&self.truth_contact, &levels, 1.0, seed + 1)

@@ -82,6 +82,10 @@ pub struct XContext {
     pub mean_offset: Vec<f64>,
     /// Half-widths `c s_k(x)` of the uniform `α_k` training range (length `K`).
     pub alpha_half_width: Vec<f64>,
+    /// Root mean square over all points of the nominal response `g_u(x, θ̄)` at the prior mean
+    /// (response units; `0` in files written before it existed).
+    #[serde(default)]
+    pub response_rms: f64,
 }
 
 /// Half-widths `c s_k(x)` of the sampling rule from a nominal response.
@@ -144,10 +148,12 @@ where
     }
     model.unobservable.evaluate(x, &theta_rule.mean(), &mut g)?;
     let half = alpha_half_width(model, &g, sampling)?;
+    let response_rms = (g.iter().map(|v| v * v).sum::<f64>() / g.len().max(1) as f64).sqrt();
     Ok(XContext {
         mean_ag: (&parts.a * gbar).iter().copied().collect(),
         mean_offset: bbar,
         alpha_half_width: half,
+        response_rms,
     })
 }
 

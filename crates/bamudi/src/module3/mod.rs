@@ -4,7 +4,8 @@
 //! Eq. 51 ([`likelihood`]); its mean at a candidate `θ` is Eq. 50 with the coefficients the
 //! [`CoefficientStrategy`] of the configured mode gives ([`coefficients`]). One-dimensional `θ`
 //! gets exact grid quadrature, more dimensions adaptive Metropolis ([`grid`], [`mcmc`]); the
-//! "without discrepancy" posterior (`ρ = 1`, `δ = 0`, `V = σ_ε² I`; Fig. 16) comes with it.
+//! "without discrepancy" posterior (`δ = 0`, `ρ` integrated, `σ_ε` profiled: the strongest
+//! calibration without a discrepancy, [`no_discrepancy`]; Fig. 16) comes with it.
 
 pub mod coefficients;
 pub mod conditional;
@@ -12,7 +13,9 @@ pub mod grid;
 pub mod likelihood;
 pub mod marginal;
 pub mod mcmc;
+pub mod no_discrepancy;
 pub mod posterior;
+pub(crate) mod rho;
 
 use crate::error::Result;
 use crate::module2::gps::CoefficientGps;
@@ -21,9 +24,10 @@ use crate::module2::{Module2, Problem};
 use crate::observe::{Observer, Stage, tick};
 use coefficients::{CoefficientStrategy, Coefficients};
 use conditional::{ConditionalCoefficients, ModelRows, RhoProfile};
-use likelihood::{FactorReport, FactoredCovariance, assemble_covariance, iid_log_density};
+use likelihood::{FactorReport, FactoredCovariance, assemble_covariance};
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
+use no_discrepancy::NoDiscrepancyFit;
 use posterior::{SupportPolicy, ThetaPosterior};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -50,8 +54,13 @@ pub struct Module3 {
     pub covariance: FactorReport,
     /// Posterior of `θ` with the discrepancy model (Eq. 38-43).
     pub posterior: ThetaPosterior,
-    /// Posterior of `θ` without discrepancy (`ρ = 1`, `δ = 0`, `V = σ_ε² I`; Fig. 16).
+    /// Posterior of `θ` without discrepancy (`δ = 0`, `ρ` integrated over its prior, `σ_ε`
+    /// profiled; [`no_discrepancy`]; Fig. 16).
     pub posterior_no_discrepancy: ThetaPosterior,
+    /// The no-discrepancy calibration at its posterior's support points (`ρ` per point), for
+    /// its predictions (baseline (b); `None` in files written before it existed).
+    #[serde(default)]
+    pub no_discrepancy: Option<NoDiscrepancyFit>,
     /// The marginal mode's fit (coefficient priors, amplitude, `ρ`'s posterior, the support
     /// points Module 4 uses).
     #[serde(default)]
@@ -123,7 +132,6 @@ where
             conditional: cc.as_ref(),
         },
         factor: &factor,
-        sigma2: sigma_eps * sigma_eps,
     };
     let bounds = p.model.prior.bounds();
     let starts = |n, seed| p.model.prior.sample(n, seed);
@@ -151,6 +159,7 @@ where
         sigma_eps,
         sigma_eps_estimated,
         covariance: factor.report(),
+        no_discrepancy: Some(NoDiscrepancyFit::new(p, &post_without)?),
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: None,
@@ -188,8 +197,9 @@ pub struct ThetaResiduals<'a, 'p, U, O> {
 }
 
 impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O> {
-    /// Stacked residuals `y − E_o(θ)` with (Eq. 41/50) and without discrepancy (`ρ = 1`, `δ = 0`).
-    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
+    /// Stacked residuals `y − E_o(θ)` with the discrepancy (Eq. 41/50), and the log likelihood
+    /// without it ([`no_discrepancy`]).
+    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, f64)> {
         let (exps, bm) = (self.p.exps, &self.p.parts.b);
         let (n_e, n_o) = (exps.len(), exps.y.ncols());
         let ModelRows { ag, b, .. } = model_rows(self.p, theta)?;
@@ -198,15 +208,17 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O
             Some(c) => Some(c.smooth(&c.delta(self.rho, &ag, &b)?) * bm.transpose()),
         };
         let mut with = Vec::with_capacity(n_e * n_o);
-        let mut without = Vec::with_capacity(n_e * n_o);
+        let (mut a, mut c) = (Vec::with_capacity(n_e * n_o), Vec::with_capacity(n_e * n_o));
         for i in 0..n_e {
             for q in 0..n_o {
                 let y = exps.y[(i, q)];
                 let shift = self.shift[(i, q)] + extra.as_ref().map_or(0.0, |e| e[(i, q)]);
                 with.push(y - (self.rho * ag[(i, q)] + b[(i, q)] + shift));
-                without.push(y - (ag[(i, q)] + b[(i, q)]));
+                a.push(ag[(i, q)]);
+                c.push(y - b[(i, q)]);
             }
         }
+        let without = no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range).log_lik;
         Ok((with, without))
     }
 
@@ -235,8 +247,6 @@ pub struct ThetaLikelihood<'a, 'p, U, O> {
     pub res: ThetaResiduals<'a, 'p, U, O>,
     /// Factored `V`.
     pub factor: &'a FactoredCovariance,
-    /// `σ_ε²` for the no-discrepancy likelihood.
-    pub sigma2: f64,
 }
 
 impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
@@ -249,10 +259,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
             return Ok((f64::NEG_INFINITY, f64::NEG_INFINITY));
         }
         let (with, without) = self.res.residuals(theta)?;
-        Ok((
-            lp + self.factor.log_density(&with)?,
-            lp + iid_log_density(&without, self.sigma2),
-        ))
+        Ok((lp + self.factor.log_density(&with)?, lp + without))
     }
 
     /// The residuals of every node in parallel, then one blocked solve with the factor of `V`
@@ -268,10 +275,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
             .map(|t| {
                 let lp = self.res.p.model.prior.ln_pdf(&[*t]);
                 let r = if lp.is_finite() {
-                    self.res.residuals(&[*t]).map(|(with, without)| {
-                        let iid = lp + iid_log_density(&without, self.sigma2);
-                        Some((lp, with, iid))
-                    })
+                    self.res
+                        .residuals(&[*t])
+                        .map(|(with, without)| Some((lp, with, lp + without)))
                 } else {
                     Ok(None)
                 };

@@ -155,6 +155,11 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         &self.support
     }
 
+    /// The model the predictions are made with.
+    pub fn model(&self) -> &MultiLevelModel<U, O> {
+        self.model
+    }
+
     /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
     /// `N x K` matrices; the marginal mode's means are averaged over the `θ` posterior), zero
     /// at rows where the response vanishes.
@@ -261,6 +266,53 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             lower,
             upper,
         })
+    }
+
+    /// The strongest prediction without a discrepancy at `x`: `ρ g_u(x, θ)` mixed over the
+    /// no-discrepancy calibration's `θ` posterior with `ρ`'s conditional moments at each point
+    /// ([`crate::module3::no_discrepancy`]; baseline (b) of every before/after). An error for
+    /// a calibration saved before that fit was kept.
+    pub fn no_discrepancy_response(&self, x: &[f64]) -> Result<Band> {
+        self.check_x(x.len())?;
+        let mut g = vec![0.0; self.model.unobservable.response_len()];
+        self.no_discrepancy_mixture(|theta| {
+            self.model.unobservable.evaluate(x, theta, &mut g)?;
+            Ok((DVector::from_column_slice(&g), DVector::zeros(g.len())))
+        })
+    }
+
+    /// The noise-free outputs of the no-discrepancy calibration at `x`: `ρ A g_u(x, θ) +
+    /// b(x, θ)` mixed as in [`no_discrepancy_response`](Self::no_discrepancy_response).
+    pub fn no_discrepancy_outputs(&self, x: &[f64]) -> Result<Band> {
+        self.check_x(x.len())?;
+        self.no_discrepancy_mixture(|theta| self.model_parts(x, theta))
+    }
+
+    /// The mixture `Σ_j w_j N(ρ_j u_j + v_j, var(ρ_j) u_j²)` over the no-discrepancy fit's
+    /// points, `(u_j, v_j) = parts(θ_j)`.
+    fn no_discrepancy_mixture(
+        &self,
+        mut parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+    ) -> Result<Band> {
+        let fit = self.cal.module3().no_discrepancy.as_ref().ok_or_else(|| {
+            BamudiError::Calibration(
+                "this calibration has no no-discrepancy fit (saved by an older version): \
+                 calibrate again to compare against it"
+                    .into(),
+            )
+        })?;
+        let comps = fit
+            .nodes
+            .iter()
+            .map(|n| {
+                let (u, v) = parts(&n.theta)?;
+                let mean = (0..u.len()).map(|q| n.rho_mean * u[q] + v[q]).collect();
+                let var = u.iter().map(|u| n.rho_var * u * u).collect();
+                Ok((mean, var))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let w: Vec<f64> = fit.nodes.iter().map(|n| n.weight).collect();
+        Ok(mixture_band(&comps, &w))
     }
 
     /// Mean and variance of the noise-free outputs at every row of `x` (`N x N_o` each): the
@@ -466,7 +518,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             x,
         )?;
         Ok(crate::module3::marginal::prior_scales(
-            &ctx.alpha_half_width,
+            &ctx,
             &self.model.basis,
             cal.config().marginal.scales,
         ))

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 /// use nalgebra::DMatrix;
 /// // one output, one coefficient, B = [2]: y = 2 α  =>  α̂ = y / 2 when noise-free
 /// let est = ExactLinearEstimator::new(DMatrix::from_element(1, 1, 2.0), 0.0).unwrap();
-/// let ctx = vec![XContext { mean_ag: vec![0.0], mean_offset: vec![0.0], alpha_half_width: vec![1.0] }];
+/// let ctx = vec![XContext { mean_ag: vec![0.0], mean_offset: vec![0.0], alpha_half_width: vec![1.0], response_rms: 1.0 }];
 /// let a = est.predict(1.0, &DMatrix::zeros(1, 1), &DMatrix::from_element(1, 1, 1.0), &ctx).unwrap();
 /// assert!((a[(0, 0)] - 0.5).abs() < 1e-12);
 /// ```

@@ -87,15 +87,17 @@
 
 mod lowrank;
 pub mod nuisance;
-mod rho;
+
 mod state;
 
 pub use lowrank::{LowRank, Spectrum};
 pub use state::{CrossCov, MarginalState, NodeTerms};
 
 use super::grid::{self, LogPosteriors, coarse_nodes};
-use super::likelihood::{FactorReport, iid_log_density};
+use super::likelihood::FactorReport;
+use super::no_discrepancy::{self, NoDiscrepancyFit};
 use super::posterior::{SupportPolicy, ThetaPosterior};
+use super::rho::{ThetaTerms, truncated_moments};
 use super::{Module3, model_rows};
 use crate::error::{BamudiError, Result};
 use crate::module2::training::{LinearParts, XContext};
@@ -106,7 +108,6 @@ use mlmodel::{DiscrepancyBasis, LinearObservableModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use nuisance::Nuisance;
 use rayon::prelude::*;
-use rho::{ThetaTerms, truncated_moments};
 use serde::{Deserialize, Serialize};
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -187,6 +188,16 @@ pub struct MarginalFit {
     pub rho_mean: f64,
     /// Posterior standard deviation of `ρ`.
     pub rho_sd: f64,
+    /// The identified scale of the model's response: `ρ⊥ = Σ aᵀ(y − b) / Σ aᵀa` over the
+    /// experiments (`a = A g(θ)`), the `ρ` that leaves the discrepancy's strains orthogonal to
+    /// the model's (the least-squares, or L2-projection, `ρ` of Tuo & Wu; Plumlee's
+    /// orthogonality in the observations' metric), mixed over the `θ` posterior: mean and sd
+    /// (`[0, 0]` in files written before it existed). Unlike `ρ` of the split
+    /// `ρ g + δ`, which the data cannot tell from a discrepancy along `g` and which only the
+    /// discrepancy's prior pins down, `ρ⊥` is fixed by the data: its sd is the gauges' noise
+    /// and `θ`'s spread. The coverage study checks it against the truth's `ρ⊥`.
+    #[serde(default)]
+    pub rho_projection: [f64; 2],
     /// Columns `R` of the low-rank factor of the prior covariance.
     pub rank: usize,
     /// The prior scale `a_k(x_i)` of each coefficient at each experiment (`N_e x K`).
@@ -196,6 +207,10 @@ pub struct MarginalFit {
     pub support: Option<Vec<f64>>,
     /// The `θ` the support was taken at (the posterior mode).
     pub support_theta: Vec<f64>,
+    /// Whether the supported basis was orthonormalised ([`CoefficientScales::Isotropic`];
+    /// `false` in files written before it existed).
+    #[serde(default)]
+    pub orthonormal_basis: bool,
     /// The `θ` posterior's support points with what Module 4 needs at each.
     pub nodes: Vec<MarginalNode>,
     /// The declared tolerances of the system's build, integrated out, with their
@@ -271,20 +286,54 @@ const LN_LENGTH_FACTOR: (f64, f64) = (-4.0, 6.0);
 /// of e either way).
 const LN_LENGTH_STEP: f64 = 1.0;
 
-/// `B` (and `L`) with the rows of response points outside the support weighted.
+/// `B` (and `L`) with the rows of response points outside the support weighted, and with
+/// `orthonormal` the supported `L` orthonormalised in the response's own metric
+/// ([`orthonormalised`]).
 pub fn supported_basis(
     parts: &LinearParts,
     support: Option<&[f64]>,
-) -> (DMatrix<f64>, DMatrix<f64>) {
-    let Some(w) = support else {
-        return (parts.l.clone(), parts.b.clone());
+    orthonormal: bool,
+) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    let mut l = match support {
+        None => parts.l.clone(),
+        Some(w) => {
+            let n_u = w.len().max(1);
+            DMatrix::from_fn(parts.l.nrows(), parts.l.ncols(), |r, k| {
+                parts.l[(r, k)] * w[r % n_u]
+            })
+        }
     };
-    let n_u = w.len().max(1);
-    let l = DMatrix::from_fn(parts.l.nrows(), parts.l.ncols(), |r, k| {
-        parts.l[(r, k)] * w[r % n_u]
-    });
+    if orthonormal {
+        l = orthonormalised(&l)?;
+    } else if support.is_none() {
+        return Ok((l, parts.b.clone()));
+    }
     let b = &parts.a * &l;
-    (l, b)
+    Ok((l, b))
+}
+
+/// Directions of the basis's Gram matrix below this fraction of its largest eigenvalue carry
+/// no response (a basis function zeroed by the support): their columns are zeroed.
+const GRAM_TOL: f64 = 1e-12;
+
+/// `L G^{-1/2}` with `G = Lᵀ L / n` (`n` rows): columns orthonormal in the mean over the
+/// response's points, so a unit coefficient is a correction of unit root mean square, and the
+/// symmetric square root keeps each new column as close as possible to the old one (its
+/// polynomial order). Directions with no response ([`GRAM_TOL`]) are zeroed, not inverted.
+pub fn orthonormalised(l: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let g = l.tr_mul(l) / l.nrows().max(1) as f64;
+    let eig = numerics::SymmetricEigen::new(&g, "Gram matrix of the supported basis")?;
+    let top = eig.values.max().max(0.0);
+    let inv_sqrt = DVector::from_fn(eig.values.len(), |i, _| {
+        let v = eig.values[i];
+        if v > GRAM_TOL * top {
+            v.sqrt().recip()
+        } else {
+            0.0
+        }
+    });
+    let root = &eig.vectors * DMatrix::from_diagonal(&inv_sqrt) * eig.vectors.transpose();
+    Ok(l * root)
 }
 
 /// The model rows at one `θ` as stacked vectors: `a = A g(x_i, θ)` and `c = y − b(x_i, θ)`
@@ -485,9 +534,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> LogPosteriors
         }
         let st = self.stacked(theta)?;
         let with = lp + self.cov.terms(&st, self.rho_range())?.log_lik;
-        // without discrepancy: ρ = 1, δ = 0, V = σ² I; the model is a + b = a + y − c
-        let r = st.ac.column(1) - st.ac.column(0);
-        Ok((with, lp + iid_log_density(r.as_slice(), self.cov.sigma2)))
+        let (a, c) = (st.ac.column(0), st.ac.column(1));
+        let without = no_discrepancy::fit_at(a.as_slice(), c.as_slice(), self.rho_range());
+        Ok((with, lp + without.log_lik))
     }
 }
 
@@ -503,7 +552,7 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let (priors, amps) = coefficient_priors(m2, ctx, &p.model.basis, &p.cfg.marginal);
+    let (priors, amps) = coefficient_priors(m2, ctx, &p.exps.x, &p.model.basis, &p.cfg.marginal);
     let lr = LowRank::new(&priors, &p.exps.x, &amps, &p.parts.b)?;
     let mut lik = MarginalLikelihood {
         p,
@@ -518,6 +567,7 @@ where
     let (post, post_without) = grid::posteriors(&lik, &bounds, starts, p.cfg, p.observer)?;
     let nodes = node_fits(&lik, &post)?;
     let (rho_mean, rho_sd) = rho_mixture(&nodes);
+    let rho_projection = projection_rho(&nodes, lik.cov.sigma2);
     let tolerances = tolerance_estimates(&lik, &theta_hat, rho_mean)?;
     Ok(Module3 {
         rho_star: rho_mean,
@@ -532,6 +582,7 @@ where
             log_det: lik.cov.log_det()?,
             jitter: 0.0,
         },
+        no_discrepancy: Some(NoDiscrepancyFit::new(p, &post_without)?),
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: Some(MarginalFit {
@@ -541,10 +592,12 @@ where
             rho_prior: p.cfg.sampling.rho_range,
             rho_mean,
             rho_sd,
+            rho_projection,
             rank: lik.cov.lr.rank(),
             amplitudes: amps,
             support: fitted.support,
             support_theta: theta_hat,
+            orthonormal_basis: p.cfg.marginal.scales == CoefficientScales::Isotropic,
             nodes,
             tolerances,
             tolerance_columns: lik.cov.tolerance_columns().cloned(),
@@ -572,7 +625,8 @@ where
             true => p.model.unobservable.discrepancy_support(&theta_hat),
             false => None,
         };
-        let (_, b) = supported_basis(&p.parts, support.as_deref());
+        let orthonormal = p.cfg.marginal.scales == CoefficientScales::Isotropic;
+        let (_, b) = supported_basis(&p.parts, support.as_deref(), orthonormal)?;
         let tolerances = lik.tolerance_columns(&theta_hat)?;
         let search = (bracket, start);
         let mut fitted = fit_hyper(
@@ -617,16 +671,20 @@ fn log_fit(h: &Hyper, cov: &Covariance, theta_hat: &[f64]) {
     );
 }
 
-/// The coefficients' correlation functions (Module 2's) and their prior scales at the
-/// experiments ([`prior_scales`]).
+/// The coefficients' correlation functions (Module 2's, or with
+/// [`CoefficientScales::Isotropic`] one shared by all: [`shared_prior`]) and their prior
+/// scales at the experiments ([`prior_scales`]).
 fn coefficient_priors(
     m2: &Module2,
     ctx: &[XContext],
+    x: &DMatrix<f64>,
     basis: &DiscrepancyBasis,
     prior: &MarginalPrior,
 ) -> (Vec<CoefficientPrior>, DMatrix<f64>) {
-    let mut priors: Vec<CoefficientPrior> =
-        m2.gps.models.iter().map(CoefficientPrior::of).collect();
+    let mut priors: Vec<CoefficientPrior> = match prior.scales {
+        CoefficientScales::Isotropic => vec![shared_prior(m2, x); m2.gps.models.len()],
+        _ => m2.gps.models.iter().map(CoefficientPrior::of).collect(),
+    };
     if prior.kernel == CoefficientKernel::Matern52 {
         let ard = priors.first().is_some_and(|p| p.length_scales.len() > 1);
         priors
@@ -638,20 +696,45 @@ fn coefficient_priors(
         .for_each(|p| p.level_variance = prior.level_variance);
     let rows: Vec<Vec<f64>> = ctx
         .iter()
-        .map(|c| prior_scales(&c.alpha_half_width, basis, prior.scales))
+        .map(|c| prior_scales(c, basis, prior.scales))
         .collect();
     let amps = DMatrix::from_fn(ctx.len(), priors.len(), |i, k| rows[i][k]);
     (priors, amps)
 }
 
-/// The prior standard deviations `a_k(x)` of the coefficients at one input from the sampling
-/// rule's half-widths `h_k(x)` there: `h_k/√3` (the sd of the uniform range the estimator of
-/// Eq. 29 learns under), shared within each response component when `rule` says so.
-pub fn prior_scales(
-    half_width: &[f64],
-    basis: &DiscrepancyBasis,
-    rule: CoefficientScales,
-) -> Vec<f64> {
+/// The one correlation function of every coefficient under [`CoefficientScales::Isotropic`]:
+/// Module 2's kernel family with, per input, half the range the experiments span (the
+/// length-scale factor fitted by type-II maximum likelihood then scales them all).
+fn shared_prior(m2: &Module2, x: &DMatrix<f64>) -> CoefficientPrior {
+    let kernel = m2
+        .gps
+        .models
+        .first()
+        .map_or(gp::Kernel::Matern52 { ard: true }, |m| m.spec().0);
+    let length_scales = (0..x.ncols())
+        .map(|j| {
+            let col = x.column(j);
+            let half = 0.5 * (col.max() - col.min());
+            if half > 0.0 { half } else { 1.0 }
+        })
+        .collect();
+    CoefficientPrior {
+        kernel,
+        length_scales,
+        level_variance: 0.0,
+    }
+}
+
+/// The prior standard deviations `a_k(x)` of the coefficients at one input from its context:
+/// from the sampling rule's half-widths `h_k(x)`, `h_k/√3` (the sd of the uniform range the
+/// estimator of Eq. 29 learns under), shared within each response component when `rule`
+/// says so; or, [`CoefficientScales::Isotropic`], the nominal response's root mean square
+/// for every coefficient.
+pub fn prior_scales(ctx: &XContext, basis: &DiscrepancyBasis, rule: CoefficientScales) -> Vec<f64> {
+    let half_width = &ctx.alpha_half_width;
+    if rule == CoefficientScales::Isotropic {
+        return vec![ctx.response_rms; half_width.len()];
+    }
     let mut a: Vec<f64> = half_width.iter().map(|h| h / 3f64.sqrt()).collect();
     if rule == CoefficientScales::SharedPerComponent {
         for c in 0..basis.components() {
@@ -741,6 +824,20 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
+    if let Some(fixed) = &lik.p.cfg.marginal.fixed {
+        let pr = scale_lengths(priors, fixed.length_scale_factor);
+        let lr = LowRank::new(&pr, &lik.p.exps.x, amps, b)?;
+        // `fixed` is accepted only with σ_ε configured (`CalibrationParams::check`)
+        let sigma2 = lik.p.cfg.sigma_eps.map_or(lik.cov.sigma2, |s| s * s);
+        let cov =
+            Covariance::new(lr, fixed.amplitude, sigma2)?.with_tolerances(tolerances.cloned());
+        return Ok(Hyper {
+            priors: pr,
+            length_factor: fixed.length_scale_factor,
+            cov: Some(cov),
+            support: None,
+        });
+    }
     let st = lik.stacked(theta)?;
     let at = |ln_c: f64| -> Result<(Vec<CoefficientPrior>, Covariance, f64)> {
         let pr = scale_lengths(priors, ln_c.exp());
@@ -915,6 +1012,22 @@ where
             sd: var[(p, p)].max(0.0).sqrt(),
         })
         .collect())
+}
+
+/// [`MarginalFit::rho_projection`] from the nodes' columns and the noise variance `σ²`:
+/// per node `N(aᵀc / aᵀa, σ² / aᵀa)`, mixed with the nodes' weights.
+fn projection_rho(nodes: &[MarginalNode], sigma2: f64) -> [f64; 2] {
+    let per: Vec<(f64, f64, f64)> = nodes
+        .iter()
+        .map(|n| {
+            let aa = n.a.norm_squared().max(1e-300);
+            (n.weight, n.a.dot(&n.c) / aa, sigma2 / aa)
+        })
+        .collect();
+    let w: f64 = per.iter().map(|p| p.0).sum::<f64>().max(1e-300);
+    let mean = per.iter().map(|p| p.0 * p.1).sum::<f64>() / w;
+    let second = per.iter().map(|p| p.0 * (p.2 + p.1 * p.1)).sum::<f64>() / w;
+    [mean, (second - mean * mean).max(0.0).sqrt()]
 }
 
 /// Mean and sd of `ρ` over the mixture of the nodes' conditionals.
@@ -1176,10 +1289,12 @@ mod tests {
             rho_prior: (0.0, 1.0),
             rho_mean: 0.5,
             rho_sd: 0.1,
+            rho_projection: [0.5, 0.1],
             rank: 0,
             amplitudes,
             support: None,
             support_theta: vec![0.0],
+            orthonormal_basis: false,
             nodes: Vec::new(),
             tolerances: Vec::new(),
             tolerance_columns,
@@ -1493,10 +1608,16 @@ mod tests {
             b: DMatrix::from_element(1, 1, 4.0),
         };
         // two points, two components: the first point is outside, the second half in
-        let (l, b) = supported_basis(&parts, Some(&[0.0, 0.5]));
+        let (l, b) = supported_basis(&parts, Some(&[0.0, 0.5]), false).unwrap();
         assert_eq!(l.as_slice(), &[0.0, 0.5, 0.0, 0.5]);
         assert_eq!(b[(0, 0)], 1.0);
-        let (l, _) = supported_basis(&parts, None);
+        let (l, _) = supported_basis(&parts, None, false).unwrap();
         assert_eq!(l, parts.l);
+        // orthonormalised: the supported column rescaled to unit mean square over the 4 rows
+        // (0.5² · 2 / 4 = 1/8 before, so times √8), still zero outside the support
+        let (l, b) = supported_basis(&parts, Some(&[0.0, 0.5]), true).unwrap();
+        let want = 0.5 * 8f64.sqrt();
+        assert!((l[(1, 0)] - want).abs() < 1e-12 && l[(0, 0)] == 0.0, "{l}");
+        assert!((b[(0, 0)] - 2.0 * want).abs() < 1e-12);
     }
 }

@@ -60,7 +60,7 @@ impl MarginalState {
         parts: &LinearParts,
         sigma2: f64,
     ) -> Result<Self> {
-        let (l, b) = supported_basis(parts, fit.support.as_deref());
+        let (l, b) = supported_basis(parts, fit.support.as_deref(), fit.orthonormal_basis)?;
         let lr = LowRank::new(&fit.priors, x, &fit.amplitudes, &b)?;
         if let Some(j) = &fit.tolerance_columns
             && j.nrows() != lr.n_obs()

@@ -5,10 +5,10 @@ use nalgebra::DMatrix;
 
 /// The log marginal likelihood of `θ` with `α` and `ρ` integrated out, with `ρ`'s
 /// conditional maximiser and precision.
-pub(super) struct ThetaTerms {
-    pub(super) log_lik: f64,
-    pub(super) rho_hat: f64,
-    pub(super) q2: f64,
+pub(crate) struct ThetaTerms {
+    pub(crate) log_lik: f64,
+    pub(crate) rho_hat: f64,
+    pub(crate) q2: f64,
 }
 
 /// `log (Φ(b) − Φ(a))` for `a < b`, accurate in both tails.
@@ -32,7 +32,7 @@ fn log_normal_interval(a: f64, b: f64) -> f64 {
 
 impl ThetaTerms {
     /// From the Gram matrix `G = [a c]ᵀ V⁻¹ [a c]`, `ln|V|`, `N_s` and `ρ`'s uniform prior.
-    pub(super) fn new(g: &DMatrix<f64>, log_det: f64, n_s: usize, (lo, hi): (f64, f64)) -> Self {
+    pub(crate) fn new(g: &DMatrix<f64>, log_det: f64, n_s: usize, (lo, hi): (f64, f64)) -> Self {
         let (q2, q1, q0) = (g[(0, 0)], g[(0, 1)], g[(1, 1)]);
         let base = -0.5 * (n_s as f64 * (2.0 * std::f64::consts::PI).ln() + log_det);
         if q2.is_nan() || q2 <= 1e-300 {
@@ -59,7 +59,7 @@ impl ThetaTerms {
 }
 
 /// Mean and variance of `N(μ, 1/q2)` truncated to `[lo, hi]`.
-pub(super) fn truncated_moments(mu: f64, q2: f64, (lo, hi): (f64, f64)) -> (f64, f64) {
+pub(crate) fn truncated_moments(mu: f64, q2: f64, (lo, hi): (f64, f64)) -> (f64, f64) {
     if q2.is_nan() || q2 <= 1e-300 {
         return (0.5 * (lo + hi), (hi - lo).powi(2) / 12.0);
     }
