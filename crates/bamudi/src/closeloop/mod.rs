@@ -70,7 +70,7 @@ pub use effect::{
 pub use effects::LinearTerm;
 pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
 pub use features::{Features, is_temperature_unit};
-pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, parse_csv, read_csv};
+pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 pub use track::{ThetaTrack, TrackAlarm, TrackAnchor, TrackConfig, TrackPoint, TrackState};
 
