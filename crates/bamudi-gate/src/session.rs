@@ -359,8 +359,8 @@ impl CalibrateSpec {
 pub fn experiments_from_table(table: &Table, model: &GateMultiLevel) -> Result<Experiments> {
     let names = model.observable.output_names();
     let outputs: Vec<&str> = names.iter().map(String::as_str).collect();
-    check_gauge_readings(table, &outputs)?;
     let all = Experiments::from_table(table, &["h_up", "h_down"], &outputs)?;
+    check_gauge_readings(table, &outputs)?;
     let col = table.column("h_up")?;
     let mut kept = vec![];
     let mut open = vec![];
@@ -486,8 +486,8 @@ pub fn record_from_table(
     ingest: &IngestConfig,
 ) -> Result<MeasuredRecord> {
     let gauges: Vec<&str> = ingest.gauge_columns.iter().map(String::as_str).collect();
-    check_gauge_readings(table, &gauges)?;
     let rec = bamudi::closeloop::from_table(table, ingest)?;
+    check_gauge_readings(table, &gauges)?;
     crate::gate::check_record(&rec, model)?;
     if gauges.is_empty() {
         return Ok(rec); // a load history (levels only), e.g. `predict --record`
