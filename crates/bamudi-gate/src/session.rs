@@ -79,8 +79,9 @@ impl GateSource {
 /// Builds the gate of a deck and its import spec.
 fn build_deck(inp: &Path, spec: &Path) -> Result<BuiltGate> {
     let start = std::time::Instant::now();
-    check_input_file("deck", inp)?;
+    // the spec first, as it is read first
     check_input_file("import spec", spec)?;
+    check_input_file("deck", inp)?;
     let named =
         |what: String, e: mitergate::GateError| GateAppError::Invalid(format!("{what}: {e}"));
     let import = ImportSpec::from_file(spec).map_err(|e| named(spec.display().to_string(), e))?;
