@@ -97,7 +97,8 @@ pub fn calibrate(
             Ok::<_, bamudi_gate::GateAppError>((cal, model))
         })
         .map_err(to_py)?;
-    for w in session::posterior_warnings(&cal, saved.gap_prior) {
+    let warnings = session::posterior_warnings(&cal, saved.gap_prior);
+    for w in session::warning_lines(&warnings, &format!("{config_label}: gap_prior")) {
         log::warn!("{w}");
     }
     Ok(Calibration { cal, saved, model })
@@ -181,10 +182,8 @@ impl Calibration {
     /// `results.json` (`inputs.warnings`); also logged when the calibration ends.
     #[getter]
     fn warnings(&self) -> Vec<String> {
-        session::posterior_warnings(&self.cal, self.saved.gap_prior)
-            .iter()
-            .map(ToString::to_string)
-            .collect()
+        let warnings = session::posterior_warnings(&self.cal, self.saved.gap_prior);
+        session::warning_lines(&warnings, "gap_prior")
     }
 
     /// The adequacy verdict's one-line summary (`None` without checks).

@@ -8,26 +8,27 @@ use crate::{invalid, to_py};
 use bamudi::closeloop::{CloseLoopConfig, MissingPolicy, close_loop as run_loop};
 use bamudi::observe::Observer;
 use bamudi_gate::gate;
-use bamudi_gate::session::ToleranceSpec;
+use bamudi_gate::session::{self, ToleranceSpec};
 use pyo3::prelude::*;
 use std::sync::Arc;
 
 /// Runs the loop on the record `csv` (the text of a field CSV: `time`, `h_up`, `h_down`,
-/// gauges, covariates; `label` names it in messages). Settings as on the command line:
+/// gauges, covariates; `label` names it in messages) or the record file `path` (read and
+/// checked as `bamudi close-loop --data` reads it). Settings as on the command line:
 /// `config_toml` (a close-loop configuration), `holdout_fraction`, `test_fraction`,
 /// `impute`, `gap_prior` (in), `max_experiments`, `gauge_noise_sd` (microstrain),
 /// `calibration_toml` (the `[calibration]` keys), `seed`; `tolerances_json`, the declared
 /// build tolerances (`[{"key", "relative_sd"}]`, as `--tolerances`).
 #[pyfunction]
-#[pyo3(signature = (gate, csv, label="record".to_string(), gap_prior=(40.0, 200.0),
+#[pyo3(signature = (gate, csv=None, label="record".to_string(), gap_prior=(40.0, 200.0),
                     max_experiments=240, gauge_noise_sd=None, config_toml=None,
                     calibration_toml=None, holdout_fraction=None, test_fraction=None,
-                    impute=false, seed=None, progress=None, tolerances_json=None))]
+                    impute=false, seed=None, progress=None, tolerances_json=None, path=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn close_loop(
     py: Python<'_>,
     gate: &Gate,
-    csv: String,
+    csv: Option<String>,
     label: String,
     gap_prior: (f64, f64),
     max_experiments: usize,
@@ -40,8 +41,17 @@ pub fn close_loop(
     seed: Option<u64>,
     progress: Option<Py<PyAny>>,
     tolerances_json: Option<String>,
+    path: Option<std::path::PathBuf>,
 ) -> PyResult<String> {
     let (lo, hi) = gap_prior;
+    let source = match (csv, path) {
+        (Some(text), None) => Record::Text(text),
+        (None, Some(p)) => {
+            session::check_input_file("record", &p).map_err(to_py)?;
+            Record::File(p)
+        }
+        _ => return Err(invalid("give the record once: its CSV text or its path")),
+    };
     let top = gate.contact.gate().quoin_height;
     if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo < hi && hi < top) {
         return Err(invalid(format!(
@@ -88,13 +98,27 @@ pub fn close_loop(
         if impute {
             ingest.missing = MissingPolicy::Interpolate;
         }
-        let rec = bamudi::closeloop::parse_csv(&csv, &label, &ingest)?;
-        gate::check_record(&rec, model)?;
+        let rec = match &source {
+            Record::Text(text) => session::parse_record(text, &label, model, &ingest)?,
+            Record::File(p) => session::read_record(p, model, &ingest)?,
+        };
         let cfg = gate::close_loop_config(cfg, &rec);
         let out = run_loop(&rec, &calibrator, &cfg)?;
-        bamudi_gate::report::closeloop::results_json(&out, None, "the close-loop report")
+        let warnings = session::close_loop_warnings(&out, &format!("gap_prior ({lo}, {hi})"));
+        for w in &warnings {
+            log::warn!("{w}");
+        }
+        bamudi_gate::report::closeloop::results_json(&out, None, &warnings, "the close-loop report")
     })
     .map_err(to_py)
+}
+
+/// Where the record comes from.
+enum Record {
+    /// CSV text (labelled by `label`).
+    Text(String),
+    /// A CSV file.
+    File(std::path::PathBuf),
 }
 
 /// The loop's settings: the configuration text (or the defaults) with the overrides.

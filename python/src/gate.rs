@@ -27,12 +27,15 @@ impl Gate {
     #[new]
     #[pyo3(signature = (path=None, element_size=None))]
     fn new(py: Python<'_>, path: Option<PathBuf>, element_size: Option<f64>) -> PyResult<Self> {
-        let config = match &path {
-            Some(p) => GateConfig::from_file(p).map_err(to_py)?,
-            None => GateConfig::default(),
-        };
+        // the command line's reading of `--gate` / `--element-size`: the same checks
+        let config = bamudi_gate::session::gate_config(
+            path.as_deref(),
+            element_size,
+            ("gate", "element_size"),
+        )
+        .map_err(to_py)?;
         let label = path.map_or("embedded default gate".into(), |p| p.display().to_string());
-        Self::configured(py, config, label, element_size)
+        Self::build(py, GateSource::Config(config), label)
     }
 
     /// The gate of TOML text (the keys of a gate file); `label` names it in messages and in
@@ -159,9 +162,10 @@ impl Gate {
         element_size: Option<f64>,
     ) -> PyResult<Self> {
         if let Some(h) = element_size {
-            if !(h.is_finite() && h > 0.0 && h <= 240.0) {
+            let max = mitergate::MAX_ELEMENT_SIZE_IN;
+            if !(h.is_finite() && h > 0.0 && h <= max) {
                 return Err(crate::invalid(format!(
-                    "element_size must be in (0, 240] in, got {h}"
+                    "element_size must be in (0, {max}] in, got {h}"
                 )));
             }
             config.mesh.element_size = h;

@@ -30,22 +30,20 @@ pyo3::create_exception!(
 /// text the command line prints after `error: `.
 pub(crate) fn to_py(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> PyErr {
     let e: Box<dyn std::error::Error + Send + Sync> = e.into();
-    let mut text = e.to_string();
-    let mut cause = e.source();
-    while let Some(c) = cause {
-        let s = c.to_string();
-        if !text.ends_with(&s) {
-            text.push_str(": ");
-            text.push_str(&s);
-        }
-        cause = c.source();
-    }
-    BamudiError::new_err(text)
+    BamudiError::new_err(bamudi_gate::error::one_line_of(e.as_ref()))
 }
 
 /// A `BamudiError` with `message`.
 pub(crate) fn invalid(message: impl Into<String>) -> PyErr {
     BamudiError::new_err(message.into())
+}
+
+/// The text of the input file `path` as the command line reads its files: `label` (the
+/// argument's name) and the path start every message; a missing file, a directory, a
+/// symbolic-link loop and a byte that is not UTF-8 (with its line) are named.
+#[pyfunction]
+fn read_input_text(label: &str, path: std::path::PathBuf) -> PyResult<String> {
+    bamudi_gate::session::read_input_text(label, &path).map_err(to_py)
 }
 
 #[pymodule]
@@ -59,6 +57,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate::experiments_csv, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(closeloop::close_loop, m)?)?;
+    m.add_function(wrap_pyfunction!(read_input_text, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

@@ -111,7 +111,7 @@ pub fn simulate_experiments<'py>(
 /// `time_unix_s` (int64) and the true gap `gap_in` per row.
 #[pyfunction]
 #[pyo3(signature = (gate, days=60.0, step_minutes=60.0, effects=vec!["none".to_string()],
-                    gap=90.0, final_gap=130.0, noise_sd=1.0, missing=None, seed=None,
+                    gap=90.0, final_gap=None, noise_sd=1.0, missing=None, seed=None,
                     reality=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn simulate_field<'py>(
@@ -121,7 +121,7 @@ pub fn simulate_field<'py>(
     step_minutes: f64,
     effects: Vec<String>,
     gap: f64,
-    final_gap: f64,
+    final_gap: Option<f64>,
     noise_sd: f64,
     missing: Option<f64>,
     seed: Option<u64>,
@@ -131,13 +131,16 @@ pub fn simulate_field<'py>(
     check_range("step_minutes", step_minutes, 1.0, 1440.0, true)?;
     check_range("noise_sd", noise_sd, 0.0, 1000.0, true)?;
     check_range("gap", gap, 0.0, 10_000.0, false)?;
-    check_range("final_gap", final_gap, 0.0, 10_000.0, false)?;
-    let mut fx = FieldEffects::default();
-    for name in &effects {
-        fx = fx
-            .with_preset(name.trim(), final_gap)
-            .map_err(|e| invalid(format!("effects: {e}")))?;
+    if let Some(g) = final_gap {
+        check_range("final_gap", g, 0.0, 10_000.0, false)?;
     }
+    let mut fx = FieldEffects::from_presets(&effects, final_gap).map_err(|e| match e {
+        mitergate::GateError::InvalidInput { what, reason } if what == "final_gap" => {
+            invalid(format!("final_gap: {reason}"))
+        }
+        mitergate::GateError::InvalidInput { reason, .. } => invalid(format!("effects: {reason}")),
+        e => invalid(format!("effects: {e}")),
+    })?;
     if let Some(p) = missing {
         check_range("missing", p, 0.0, 0.9, true)?;
         fx.missing = Some(MissingValues { probability: p });

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import bamudi
-from conftest import CONFIG
+from conftest import CONFIG, REPO
 
 
 def expect(fragment, fn, *args, **kwargs):
@@ -108,3 +108,109 @@ def test_close_loop_errors(gate, tmp_path):
     bad = tmp_path / "r.csv"
     bad.write_text(rec.csv.replace("h_down", "h_low"))
     expect("h_down", bamudi.close_loop, gate, bad)
+
+
+# --- issue 62: the last rough edges of bad input, one test per class ---------------------
+
+def _record_file(tmp_path, rec, name, edit):
+    """The record's CSV with `edit(rows)` applied to its rows (lists of cells; the header is
+    rows[0], file line i + 1), written to `name`."""
+    rows = [line.split(",") for line in rec.csv.splitlines()]
+    edit(rows)
+    path = tmp_path / name
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    return path
+
+
+def test_absurd_readings_are_refused_naming_line_and_column(gate, experiments, tmp_path):
+    cols, data = list(experiments.columns), experiments.data.copy()
+    data[2, 4] = 1e300  # row 2 = line 4, column SG3
+    msg = expect("line 4, column `SG3`", bamudi.calibrate, gate, data, CONFIG, columns=cols)
+    assert "100000" in msg, msg
+    rec = bamudi.simulate_field(gate, days=2.0, seed=1)
+
+    def absurd(rows):
+        rows[9][rows[0].index("SG2")] = "-2e5"
+
+    path = _record_file(tmp_path, rec, "absurd.csv", absurd)
+    msg = expect("line 10, column `SG2`", bamudi.close_loop, gate, path)
+    assert "100000" in msg, msg
+
+    def fault_code(rows):
+        rows[6][rows[0].index("air_temp_f")] = "-999"
+
+    path = _record_file(tmp_path, rec, "fault.csv", fault_code)
+    msg = expect("line 7, column `air_temp_f`", bamudi.close_loop, gate, path)
+    assert "degF" in msg, msg
+
+
+def test_limits_hold_on_every_path(tmp_path):
+    text = (REPO / "crates/mitergate/data/default_gate.toml").read_text()
+    coarse = tmp_path / "coarse.toml"
+    coarse.write_text(text.replace("element_size = 12.0", "element_size = 1e6"))
+    msg = expect("mesh.element_size", bamudi.Gate, path=str(coarse))
+    assert "240" in msg, msg
+    msg = expect("mesh.element_size", bamudi.Gate.from_toml, coarse.read_text())
+    assert "240" in msg, msg
+    expect("element_size must be in (0, 240]", bamudi.Gate, element_size=1e6)
+
+
+def test_contradictory_effects_are_refused(gate):
+    expect("`none` cannot be combined", bamudi.simulate_field, gate, effects=["none", "thermal"])
+    expect("`thermal` is named twice", bamudi.simulate_field, gate, effects=["thermal", "thermal"])
+    expect("final_gap: the final gap is used only by the `gap-growth` effect",
+           bamudi.simulate_field, gate, effects=["thermal"], final_gap=120.0)
+
+
+def test_messages_name_the_culprit(gate, experiments, tmp_path):
+    rec = bamudi.simulate_field(gate, days=2.0, seed=1)
+
+    def stuck(rows):
+        for r in rows[1:]:
+            r[rows[0].index("SG1")] = "5.0"
+
+    expect("column `SG1` is constant", bamudi.close_loop, gate,
+           _record_file(tmp_path, rec, "stuck.csv", stuck))
+
+    def open_gate(rows):
+        up, down = rows[0].index("h_up"), rows[0].index("h_down")
+        for r in rows[1:]:
+            r[down] = r[up]
+
+    expect("every row has the gate open", bamudi.close_loop, gate,
+           _record_file(tmp_path, rec, "open.csv", open_gate))
+
+    def never_read(rows):
+        for r in rows[1:]:
+            r[rows[0].index("SG4")] = ""
+
+    expect("column `SG4`: every value is missing", bamudi.close_loop, gate,
+           _record_file(tmp_path, rec, "empty.csv", never_read))
+    latin1 = tmp_path / "latin1.csv"
+    lines = rec.csv.encode().split(b"\n")
+    lines[4] = lines[4] + b"\xb5"
+    latin1.write_bytes(b"\n".join(lines))
+    msg = expect("line 5", bamudi.close_loop, gate, latin1)
+    assert "0xB5 is not UTF-8" in msg and msg.count("UTF-8") <= 2, msg
+    toml = tmp_path / "cal.toml"
+    toml.write_bytes(b"gap_prior = [81.0, 105.0]\n# 20 \xb0F\n")
+    expect("line 2: byte 0xB0 is not UTF-8", bamudi.calibrate, gate, experiments, toml)
+    loop = tmp_path / "loop.csv"
+    loop.symlink_to(tmp_path / "loop2.csv")
+    (tmp_path / "loop2.csv").symlink_to(loop)
+    expect("symbolic links", bamudi.close_loop, gate, loop)
+    deck = tmp_path / "gate.inp"
+    deck.write_text("*HEADING\nexported gate\n")
+    expect("Gate.from_inp", bamudi.Gate, path=str(deck))
+    msg = expect("nope.toml", bamudi.Gate, path=str(tmp_path / "nope.toml"))
+    assert msg.count("(os error") <= 1, msg
+
+
+def test_a_prior_that_excludes_the_data_warns_which_bound_to_widen(gate, experiments):
+    narrow = cfg(gap_prior=[81.0, 85.0])  # the data's gap is 90 in
+    cal = bamudi.calibrate(gate, experiments, narrow)
+    assert any("gap_prior" in w and "raise the upper bound above 85" in w for w in cal.warnings), cal.warnings
+    rec = bamudi.simulate_field(gate, days=7.0, seed=1)
+    out = bamudi.close_loop(gate, rec, gap_prior=(60.0, 80.0), max_experiments=30)
+    warnings = out.get("warnings", [])
+    assert any("gap_prior (60, 80)" in w and "raise the upper bound above 80" in w for w in warnings), warnings

@@ -113,16 +113,15 @@ pub fn ingest_config(model: &GateMultiLevel) -> IngestConfig {
     IngestConfig::new(&["h_up", "h_down"], &gauges)
 }
 
-/// Reads a gate's field record and checks every row against the gate's input domain (the
-/// error names the file and line).
+/// Reads a gate's field record with every check of
+/// [`session::record_from_table`](crate::session::record_from_table) (gauge readings, the
+/// gate's input domain, informative rows); errors name the file, line and column.
 pub fn read_record(
     path: &Path,
     model: &GateMultiLevel,
     cfg: &IngestConfig,
 ) -> Result<MeasuredRecord> {
-    let rec = bamudi::closeloop::read_csv(path, cfg)?;
-    check_record(&rec, model)?;
-    Ok(rec)
+    crate::session::read_record(path, model, cfg)
 }
 
 /// The truth's contact model of a reality: the as-built gate (with the truth's mesh) built

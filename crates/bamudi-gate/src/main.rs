@@ -54,13 +54,15 @@ enum Cmd {
     ExportGate(cli::export::ExportArgs),
 }
 
-/// Prints an error as one line of its causes (`error: outer: inner: ...`), without the
-/// backtrace `RUST_BACKTRACE` would add, and exits with status 1.
+/// Prints an error as one line of its causes (`error: outer: inner: ...`, each piece once:
+/// [`bamudi_gate::error::one_line`]), without the backtrace `RUST_BACKTRACE` would add, and
+/// exits with status 1.
 fn main() -> std::process::ExitCode {
     match run(Cli::parse()) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            let causes = e.chain().map(ToString::to_string);
+            eprintln!("error: {}", bamudi_gate::error::one_line(causes));
             std::process::ExitCode::FAILURE
         }
     }

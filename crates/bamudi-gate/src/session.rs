@@ -7,6 +7,7 @@
 use crate::calibrator::GateCalibrator;
 use crate::error::{GateAppError, Result};
 use crate::gate::SavedModel;
+use bamudi::closeloop::{IngestConfig, MeasuredRecord};
 use bamudi::data::Table;
 use bamudi::module3::posterior::{GridWarning, ThetaPosterior};
 use bamudi::observe::Observer;
@@ -15,7 +16,10 @@ use mitergate::contact::ContactParams;
 use mitergate::data::truth::{self, Scenario};
 use mitergate::inp::{ImportSpec, InpModel};
 use mitergate::reality::Reality;
-use mitergate::{ContactForceModel, ContactModel, GateConfig, GateMultiLevel, StrainModel};
+use mitergate::{
+    ContactForceModel, ContactModel, GateConfig, GateMultiLevel, MAX_GAUGE_READING_MICROSTRAIN,
+    StrainModel,
+};
 use mlmodel::{BuildTolerance, Memo, ObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
@@ -75,6 +79,9 @@ impl GateSource {
 /// Builds the gate of a deck and its import spec.
 fn build_deck(inp: &Path, spec: &Path) -> Result<BuiltGate> {
     let start = std::time::Instant::now();
+    // the spec first, as it is read first
+    check_input_file("import spec", spec)?;
+    check_input_file("deck", inp)?;
     let named =
         |what: String, e: mitergate::GateError| GateAppError::Invalid(format!("{what}: {e}"));
     let import = ImportSpec::from_file(spec).map_err(|e| named(spec.display().to_string(), e))?;
@@ -354,6 +361,7 @@ pub fn experiments_from_table(table: &Table, model: &GateMultiLevel) -> Result<E
     let names = model.observable.output_names();
     let outputs: Vec<&str> = names.iter().map(String::as_str).collect();
     let all = Experiments::from_table(table, &["h_up", "h_down"], &outputs)?;
+    check_gauge_readings(table, &outputs)?;
     let col = table.column("h_up")?;
     let mut kept = vec![];
     let mut open = vec![];
@@ -383,40 +391,231 @@ pub fn experiments_from_table(table: &Table, model: &GateMultiLevel) -> Result<E
         all.x.select_rows(kept.iter()),
         all.y.select_rows(kept.iter()),
     )?;
-    check_informative(table, &exps, &outputs)?;
+    check_informative(table.file(), &exps.x, &exps.y, &outputs, all.len())?;
     Ok(exps)
 }
 
-/// Refuses data that would give a confident number from nothing: too few distinct
-/// conditions, or a gauge that never changes (stuck or disconnected).
-fn check_informative(table: &Table, exps: &Experiments, outputs: &[&str]) -> Result<()> {
-    let mut conditions: Vec<(u64, u64)> = (0..exps.len())
-        .map(|i| (exps.x[(i, 0)].to_bits(), exps.x[(i, 1)].to_bits()))
+/// Refuses a gauge value beyond ±[`MAX_GAUGE_READING_MICROSTRAIN`] (10 % strain, more than
+/// any strain gauge reports) in the columns `gauges`, naming the file, line and column.
+pub fn check_gauge_readings(table: &Table, gauges: &[&str]) -> Result<()> {
+    Ok(table.check_magnitude(
+        gauges,
+        MAX_GAUGE_READING_MICROSTRAIN,
+        "microstrain",
+        "no strain gauge reports more than 10 % strain (a unit mix-up, an overflow or a \
+         placeholder?)",
+    )?)
+}
+
+/// Refuses data that would give a confident number from nothing, before any calibration:
+/// too few distinct loaded conditions (every row with the gate open, or the same levels
+/// repeated), or a gauge that never changes (stuck or disconnected). `x` and `y` are the
+/// loaded rows (the gate closed) of the `rows` read from `file`.
+fn check_informative(
+    file: &str,
+    x: &DMatrix<f64>,
+    y: &DMatrix<f64>,
+    outputs: &[&str],
+    rows: usize,
+) -> Result<()> {
+    let mut conditions: Vec<(u64, u64)> = (0..x.nrows())
+        .map(|i| (x[(i, 0)].to_bits(), x[(i, 1)].to_bits()))
         .collect();
     conditions.sort_unstable();
     conditions.dedup();
     if conditions.len() < MIN_DISTINCT_EXPERIMENTS {
+        let open = match rows - x.nrows() {
+            0 => String::new(),
+            n if n == rows => format!(
+                " (every row has the gate open: columns `h_up` - `h_down` below \
+                 {} in, no quoin force)",
+                mitergate::MIN_HEAD_IN
+            ),
+            n => format!(" ({n} of the {rows} rows have the gate open and are left out)"),
+        };
         return Err(GateAppError::Invalid(format!(
-            "{}: {} experiment(s) with {} distinct water-level pair(s); calibrate needs at least \
-             {MIN_DISTINCT_EXPERIMENTS} distinct conditions",
-            table.file(),
-            exps.len(),
+            "{file}: {} loaded row(s) with {} distinct water-level pair(s){open}; a calibration \
+             needs at least {MIN_DISTINCT_EXPERIMENTS} distinct conditions with the gate closed",
+            x.nrows(),
             conditions.len()
         )));
     }
     for (j, name) in outputs.iter().enumerate() {
-        let col = exps.y.column(j);
+        let col = y.column(j);
         let (lo, hi) = (col.min(), col.max());
         if hi <= lo {
             return Err(GateAppError::Invalid(format!(
-                "{}: column `{name}` is constant ({lo} microstrain in every row): a stuck or \
-                 disconnected gauge carries no information; fix or drop it (and its gauge in \
-                 the gate file)",
-                table.file()
+                "{file}: column `{name}` is constant ({lo} microstrain in every loaded row): a \
+                 stuck or disconnected gauge carries no information; fix or drop it (and its \
+                 gauge in the gate file)"
             )));
         }
     }
     Ok(())
+}
+
+/// Reads a gate's field record (`path`, labelled by its path in messages) with the checks of
+/// [`record_from_table`].
+pub fn read_record(
+    path: &Path,
+    model: &GateMultiLevel,
+    ingest: &IngestConfig,
+) -> Result<MeasuredRecord> {
+    record_from_table(&Table::read(path)?, model, ingest)
+}
+
+/// A gate's field record from CSV text (`label` names it in messages) with the checks of
+/// [`record_from_table`].
+pub fn parse_record(
+    text: &str,
+    label: &str,
+    model: &GateMultiLevel,
+    ingest: &IngestConfig,
+) -> Result<MeasuredRecord> {
+    record_from_table(&Table::parse(text, label)?, model, ingest)
+}
+
+/// The record of a gate's table with every check a calibration of the gate applies to its
+/// experiments ([`experiments_from_table`]), so that the close loop refuses what `calibrate`
+/// refuses, before any calibration, with the file, line and column: gauge readings beyond
+/// ±[`MAX_GAUGE_READING_MICROSTRAIN`], levels outside the gate's domain, too few distinct
+/// loaded conditions (every row with the gate open), a gauge that never changes (the last two
+/// only for a record with gauges, not for a load history).
+pub fn record_from_table(
+    table: &Table,
+    model: &GateMultiLevel,
+    ingest: &IngestConfig,
+) -> Result<MeasuredRecord> {
+    let gauges: Vec<&str> = ingest.gauge_columns.iter().map(String::as_str).collect();
+    let rec = bamudi::closeloop::from_table(table, ingest)?;
+    check_gauge_readings(table, &gauges)?;
+    crate::gate::check_record(&rec, model)?;
+    if gauges.is_empty() {
+        return Ok(rec); // a load history (levels only), e.g. `predict --record`
+    }
+    let loaded: Vec<usize> = (0..rec.len())
+        .filter(|&i| {
+            !model
+                .unobservable
+                .response_vanishes(&[rec.x[(i, 0)], rec.x[(i, 1)]])
+        })
+        .collect();
+    check_informative(
+        &rec.file,
+        &rec.x.select_rows(loaded.iter()),
+        &rec.y.select_rows(loaded.iter()),
+        &gauges,
+        rec.len(),
+    )?;
+    Ok(rec)
+}
+
+/// Checks that the input file `path` of `label` (a flag or argument name) can be read before
+/// any work: it exists (a broken symbolic link is named as one), is not a directory, and its
+/// metadata can be read (a symbolic-link loop or a permission error is reported as such).
+pub fn check_input_file(label: &str, path: &Path) -> Result<()> {
+    let shown = path.display();
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => Err(GateAppError::Invalid(format!(
+            "{label} {shown}: is a directory, not a file"
+        ))),
+        Ok(_) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let why = match std::fs::read_link(path) {
+                Ok(target) => format!(
+                    "is a symbolic link to `{}`, which does not exist",
+                    target.display()
+                ),
+                Err(_) => "file does not exist".into(),
+            };
+            Err(GateAppError::Invalid(format!("{label} {shown}: {why}")))
+        }
+        Err(e) => Err(GateAppError::Invalid(format!(
+            "{label} {shown}: cannot be read: {e}"
+        ))),
+    }
+}
+
+/// The text of the input file `path` of `label` ([`check_input_file`], then
+/// [`bamudi::data::read_text`]: a byte that is not UTF-8 is named with its line).
+pub fn read_input_text(label: &str, path: &Path) -> Result<String> {
+    check_input_file(label, path)?;
+    bamudi::data::read_text(path).map_err(|e| {
+        let (message, shown) = (e.to_string(), path.display().to_string());
+        GateAppError::Invalid(match message.starts_with(&shown) {
+            true => format!("{label} {message}"),
+            false => format!("{label} {shown}: {message}"),
+        })
+    })
+}
+
+/// The gate configuration of `path` (a gate TOML) or the embedded default, with the mesh
+/// `element_size` (in) when given: what `--gate` / `--element-size` and Python's `Gate(path,
+/// element_size)` read. A deck (`.inp`) given as a configuration is refused with the way to
+/// import it; `labels` name the file and the size in messages (the flags, or the argument
+/// names).
+pub fn gate_config(
+    path: Option<&Path>,
+    element_size: Option<f64>,
+    labels: (&str, &str),
+) -> Result<GateConfig> {
+    let (file_label, size_label) = labels;
+    let mut cfg = match path {
+        Some(p) => {
+            let text = read_input_text(file_label, p)?;
+            if let Some(line) = deck_keyword_line(p, &text) {
+                return Err(GateAppError::Invalid(format!(
+                    "{file_label} {}: a finite-element deck (`*` keyword on line {line}), not a \
+                     gate configuration (TOML); import a deck with its spec: `--gate-inp {} \
+                     --import-spec spec.toml` (Python: `Gate.from_inp`)",
+                    p.display(),
+                    p.display()
+                )));
+            }
+            gate_config_of_text(&text, p)
+                .map_err(|e| GateAppError::Invalid(format!("{file_label} {}: {e}", p.display())))?
+        }
+        None => GateConfig::default(),
+    };
+    if let Some(h) = element_size {
+        if !(h.is_finite() && h > 0.0 && h <= mitergate::MAX_ELEMENT_SIZE_IN) {
+            return Err(GateAppError::Invalid(format!(
+                "{size_label} must be in (0, {}] in, got {h}",
+                mitergate::MAX_ELEMENT_SIZE_IN
+            )));
+        }
+        cfg.mesh.element_size = h;
+        cfg.validate()
+            .map_err(|e| GateAppError::Invalid(format!("{size_label} {h}: {e}")))?;
+    }
+    Ok(cfg)
+}
+
+/// A gate configuration parsed from the text of `path` and validated.
+fn gate_config_of_text(
+    text: &str,
+    path: &Path,
+) -> std::result::Result<GateConfig, mitergate::GateError> {
+    let cfg: GateConfig = toml::from_str(text).map_err(|e| mitergate::GateError::ConfigParse {
+        path: Some(path.to_path_buf()),
+        message: e.to_string(),
+    })?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+/// The line of an Abaqus / CalculiX keyword (`*HEADING`, `*NODE`, ...) that starts a
+/// finite-element deck, when `text` (of `path`) is one: a `.inp` file, or a first
+/// significant line starting with `*`.
+fn deck_keyword_line(path: &Path, text: &str) -> Option<usize> {
+    let first = text
+        .lines()
+        .enumerate()
+        .find(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'))?;
+    let inp = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("inp"));
+    (inp || first.1.trim_start().starts_with('*')).then_some(first.0 + 1)
 }
 
 /// The grid posterior's warnings (mass at a prior bound, an under-resolved interval), which
@@ -426,6 +625,39 @@ pub fn posterior_warnings(cal: &Calibration, prior: (f64, f64)) -> Vec<GridWarni
         ThetaPosterior::Grid(g) => g.warnings(prior),
         ThetaPosterior::Mcmc(_) => vec![],
     }
+}
+
+/// The posterior's warnings as lines: a bound warning starts with `key`, the prior's key or
+/// flag in the front end (`cal.toml: gap_prior`, `--gap-prior 10,20`, `gap_prior`), so the
+/// line names what to widen and which way.
+pub fn warning_lines(warnings: &[GridWarning], key: &str) -> Vec<String> {
+    warnings
+        .iter()
+        .map(|w| match w {
+            GridWarning::AtPriorBound { .. } => format!("{key}: {w}"),
+            GridWarning::UnderResolved { .. } => w.to_string(),
+        })
+        .collect()
+}
+
+/// The warnings of the close loop's final calibration of the gate (the θ posterior against
+/// its prior, as [`posterior_warnings`] for `calibrate`), as lines starting with `key`
+/// ([`warning_lines`]); none when the loop's model is not a gate calibration.
+pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str) -> Vec<String> {
+    let any: &dyn std::any::Any = out.model.as_ref();
+    let Some(gate) = any.downcast_ref::<crate::calibrator::CalibratedGate>() else {
+        return vec![];
+    };
+    let prior = out.model.theta_bounds();
+    let key = format!("{key}: the loop's final calibration");
+    let lines = warning_lines(&posterior_warnings(gate.calibration(), prior), &key);
+    lines
+        .into_iter()
+        .map(|l| match l.starts_with(&key) {
+            true => l,
+            false => format!("the loop's final calibration: {l}"),
+        })
+        .collect()
 }
 
 /// BA-MUDI Modules 2-3 on the gate with the adequacy verdict and the gate's physics checks

@@ -33,6 +33,16 @@ pub enum BamudiError {
         /// What is wrong.
         reason: String,
     },
+    /// A text file that is not UTF-8; `line` is the line of its first bad byte.
+    #[error("{file}: line {line}: {reason}")]
+    Encoding {
+        /// File path.
+        file: String,
+        /// File line of the first byte that is not UTF-8 (the first line is 1).
+        line: usize,
+        /// What is wrong and what to do.
+        reason: String,
+    },
     /// File-system error with the path.
     #[error("{path}: {source}")]
     Io {

@@ -95,7 +95,9 @@ pub use condense::{CondensedGate, DEFAULT_NU, HydrostaticTable, RigidQuoinRespon
 pub use contact::{ContactModel, ContactParams, ContactSolution};
 pub use error::GateError;
 pub use fe::{DOF_NAMES, Reactions};
-pub use gate::{GateConfig, GateModel, WATER_LEVEL_RANGE};
+pub use gate::{
+    GateConfig, GateModel, MAX_ELEMENT_SIZE_IN, MAX_GAUGE_READING_MICROSTRAIN, WATER_LEVEL_RANGE,
+};
 pub use multilevel::{
     ContactForceModel, GateMultiLevel, GateSummary, MIN_HEAD_IN, MultiLevelSpec, StrainModel,
     build_contact, multilevel,

@@ -149,23 +149,34 @@ impl Reality {
     }
 
     fn check_numbers(&self) -> Result<(), GateError> {
+        let max = crate::MAX_ELEMENT_SIZE_IN;
         if let Some(h) = self.mesh_element_size_in
-            && !(h.is_finite() && h > 0.0)
+            && !(h.is_finite() && h > 0.0 && h <= max)
         {
             return Err(invalid(
                 "mesh_element_size_in",
-                format!("must be > 0 in, got {h}"),
+                format!("must be in (0, {max}] in, got {h}"),
             ));
         }
+        let reading = crate::MAX_GAUGE_READING_MICROSTRAIN;
         for (i, s) in self.sensors.iter().enumerate() {
             let key = |k: &str| format!("sensors[{i}] ({}).{k}", s.gauge);
+            if !s.scale.is_finite() {
+                return Err(invalid(
+                    key("scale"),
+                    format!("must be finite, got {}", s.scale),
+                ));
+            }
+            // what a sensor adds is a gauge reading: the readings' own limit applies
             for (k, v) in [
-                ("scale", s.scale),
                 ("offset_microstrain", s.offset_microstrain),
                 ("drift_microstrain", s.drift_microstrain),
             ] {
-                if !v.is_finite() {
-                    return Err(invalid(key(k), format!("must be finite, got {v}")));
+                if !(v.is_finite() && v.abs() <= reading) {
+                    return Err(invalid(
+                        key(k),
+                        format!("must lie in [-{reading}, {reading}] microstrain, got {v}"),
+                    ));
                 }
             }
             if let Some(st) = s.step {
@@ -175,8 +186,14 @@ impl Reality {
                         format!("must lie in [0, 1], got {}", st.at_fraction),
                     ));
                 }
-                if !st.size_microstrain.is_finite() {
-                    return Err(invalid(key("step.size_microstrain"), "must be finite"));
+                if !(st.size_microstrain.is_finite() && st.size_microstrain.abs() <= reading) {
+                    return Err(invalid(
+                        key("step.size_microstrain"),
+                        format!(
+                            "must lie in [-{reading}, {reading}] microstrain, got {}",
+                            st.size_microstrain
+                        ),
+                    ));
                 }
             }
         }

@@ -120,7 +120,7 @@ def simulate_field(
     step_minutes: float = 60.0,
     effects: Sequence[str] = ("none",),
     gap: float = 90.0,
-    final_gap: float = 130.0,
+    final_gap: Optional[float] = None,
     noise_sd: float = 1.0,
     missing: Optional[float] = None,
     seed: Optional[int] = None,
@@ -128,7 +128,8 @@ def simulate_field(
 ) -> FieldRecord:
     """A field record of ``days`` (a row every ``step_minutes``) with the gate (or a reality)
     as the truth and the named ``effects`` switched on (thermal, drift, offset-jump,
-    gap-growth, hysteresis, wall-flexure, none); as ``bamudi simulate field``."""
+    gap-growth, hysteresis, wall-flexure, none; ``none`` alone, each at most once);
+    ``final_gap`` (in, default 130) only with ``gap-growth``; as ``bamudi simulate field``."""
     if isinstance(effects, str):
         effects = [effects]
     d = _native.simulate_field(
@@ -219,15 +220,15 @@ def _path(p) -> Optional[str]:
 
 def _read_toml(value, what: str) -> Tuple[str, str]:
     """``(text, label)`` of TOML given as a file path (``os.PathLike``, or a one-line string
-    ending in ``.toml``) or as text; a path that is not a file is an error naming it."""
+    ending in ``.toml``) or as text; a path that cannot be read as UTF-8 text is an error
+    naming it (and the line of a bad byte)."""
     if isinstance(value, os.PathLike) or (
         isinstance(value, str) and "\n" not in value and value.strip().endswith(".toml")
     ):
         path = os.fspath(value)
-        if not os.path.isfile(path):
-            raise BamudiError(f"{what} {path}: file does not exist")
-        with open(path, encoding="utf-8") as f:
-            return f.read(), path
+        # read as the command line reads its files: a missing file, a directory, a link loop
+        # or a byte that is not UTF-8 (with its line) raise BamudiError naming `what` and path
+        return _native.read_input_text(what, path), path
     if isinstance(value, str):
         return value, what
     raise TypeError(f"{what} must be TOML text or a TOML file path, not {type(value).__name__}")
@@ -323,14 +324,14 @@ def close_loop(
     report as a dict: the command line's ``results.json`` without its ``record_fatigue`` part
     (the quoin block's fatigue over the record); with ``tolerances``, its ``"tolerances"`` key
     gives what the final calibration read of each (``[{"name", "mean", "sd"}]`` in their own
-    sds)."""
+    sds); ``"warnings"`` (when any) says when the final gap posterior is pressed against a
+    bound of ``gap_prior`` and which bound to widen (also logged)."""
     if isinstance(record, FieldRecord):
-        csv, label = record.csv, "record"
+        source = {"csv": record.csv, "label": "record"}
     else:
-        with open(record, encoding="utf-8") as f:
-            csv, label = f.read(), os.fspath(record)
+        source = {"path": os.fspath(record)}  # read and checked as `close-loop --data`
     text = _native.close_loop(
-        gate, csv, label=label, gap_prior=tuple(gap_prior), max_experiments=max_experiments,
+        gate, **source, gap_prior=tuple(gap_prior), max_experiments=max_experiments,
         gauge_noise_sd=gauge_noise_sd, config_toml=_text(config, "config"),
         calibration_toml=_text(calibration_config, "calibration_config"), holdout_fraction=holdout_fraction,
         test_fraction=test_fraction, impute=impute, seed=seed, progress=progress,

@@ -67,7 +67,7 @@ def simulate_experiments(
 ) -> Tuple[list[str], npt.NDArray[np.float64]]: ...
 def simulate_field(
     gate: Gate, days: float = 60.0, step_minutes: float = 60.0, effects: Sequence[str] = ...,
-    gap: float = 90.0, final_gap: float = 130.0, noise_sd: float = 1.0, missing: Optional[float] = None,
+    gap: float = 90.0, final_gap: Optional[float] = None, noise_sd: float = 1.0, missing: Optional[float] = None,
     seed: Optional[int] = None, reality: Optional[str] = None,
 ) -> dict[str, Any]: ...
 def calibrate(
@@ -77,9 +77,11 @@ def calibrate(
 ) -> Calibration: ...
 def experiments_csv(columns: Sequence[str], data: npt.NDArray[np.float64]) -> str: ...
 def close_loop(
-    gate: Gate, csv: str, label: str = "record", gap_prior: Tuple[float, float] = (40.0, 200.0),
+    gate: Gate, csv: Optional[str] = None, label: str = "record", gap_prior: Tuple[float, float] = (40.0, 200.0),
     max_experiments: int = 240, gauge_noise_sd: Optional[float] = None, config_toml: Optional[str] = None,
     calibration_toml: Optional[str] = None, holdout_fraction: Optional[float] = None,
     test_fraction: Optional[float] = None, impute: bool = False, seed: Optional[int] = None,
-    progress: Optional[Callable[[str, int, int], Any]] = None,
+    progress: Optional[Callable[[str, int, int], Any]] = None, tolerances_json: Optional[str] = None,
+    path: Optional[str] = None,
 ) -> str: ...
+def read_input_text(label: str, path: str) -> str: ...

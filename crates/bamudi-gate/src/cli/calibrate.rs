@@ -33,8 +33,7 @@ pub struct CalibrateArgs {
 
 /// Reads and checks the `calibrate` configuration file; errors name the file and the key.
 pub fn read_spec(path: &Path) -> Result<CalibrateSpec> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text = session::read_input_text("--config", path)?;
     Ok(CalibrateSpec::from_toml_str(
         &text,
         &path.display().to_string(),
@@ -53,6 +52,7 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
     } else if !spec.tolerances.is_empty() {
         anyhow::bail!("{label}: `tolerances` need a gate configuration, not an imported deck");
     }
+    session::check_input_file("--data", &a.data)?;
     let table = bamudi::data::Table::read(&a.data)
         .with_context(|| format!("--data {}", a.data.display()))?;
     let out = StagedDir::prepare("--out", &a.out, a.force)?;
@@ -72,7 +72,8 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
     );
     let bars = Bars::new();
     let cal = session::calibrate(&model, &exps, &config, &bars)?;
-    let warnings = posterior_warnings(&cal, saved.gap_prior);
+    let key = format!("{label}: `gap_prior`");
+    let warnings = session::warning_lines(&posterior_warnings(&cal, saved.gap_prior), &key);
     for w in &warnings {
         log::warn!("{w}");
     }
@@ -86,7 +87,7 @@ pub fn run(a: &CalibrateArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> 
         gap_prior_in: saved.gap_prior,
         seed: config.seed,
         theta_true: None,
-        warnings: warnings.iter().map(ToString::to_string).collect(),
+        warnings,
     };
     bamudi_gate::report::calibration::write_report(
         &cal,

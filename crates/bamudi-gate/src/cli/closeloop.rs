@@ -13,7 +13,7 @@ use bamudi_gate::output::StagedDir;
 use bamudi_gate::progress::Bars;
 use bamudi_gate::record_fatigue::{self, RecordFatigue, RecordFatigueOptions, record_fatigue};
 use bamudi_gate::report::calibration::ReportInputs;
-use bamudi_gate::session::GateSource;
+use bamudi_gate::session::{self, GateSource};
 use bamudi_gate::session::{ToleranceSpec, check_tolerance_keys, check_tolerance_specs};
 use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::UnobservableModel;
@@ -48,10 +48,12 @@ pub struct CloseLoopCmd {
     /// Replace an existing non-empty `--out` directory once the new report is complete.
     #[arg(long)]
     force: bool,
-    /// Uniform prior of the gap θ (in), `lo,hi` (e.g. `--gap-prior 60,120`).
-    #[arg(long, value_delimiter = ',', num_args = 1, allow_negative_numbers = true,
-          default_values_t = [40.0, 200.0])]
-    gap_prior: Vec<f64>,
+    /// Uniform prior of the gap θ (in), one value `lo,hi` (e.g. `--gap-prior 60,120`).
+    // Two values are taken in so that the old form `--gap-prior 60 120` is refused by
+    // `check_args` with the flag and the `lo,hi` form named, not by clap as a stray argument.
+    #[arg(long, num_args = 1..=2, allow_negative_numbers = true, value_name = "LO,HI",
+          default_value = "40,200")]
+    gap_prior: Vec<String>,
     /// Maximum rows per BA-MUDI calibration (evenly thinned in time; the checks use all rows),
     /// at least 10.
     #[arg(long, default_value_t = 240, allow_negative_numbers = true,
@@ -83,27 +85,47 @@ struct ToleranceFile {
 
 /// Checks the command's own arguments; returns the gap prior `(lo, hi)` (in).
 fn check_args(c: &CloseLoopCmd) -> Result<(f64, f64)> {
-    anyhow::ensure!(
-        c.gap_prior.len() == 2,
-        "--gap-prior must be two numbers lo,hi (in), got {} value(s)",
-        c.gap_prior.len()
-    );
-    let (lo, hi) = (c.gap_prior[0], c.gap_prior[1]);
-    anyhow::ensure!(
-        lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo < hi,
-        "--gap-prior must be lo,hi with 0 <= lo < hi (in), got {lo},{hi}"
-    );
-    anyhow::ensure!(
-        c.data.exists(),
-        "--data {}: file does not exist",
-        c.data.display()
-    );
+    let (lo, hi) = gap_prior(&c.gap_prior)?;
+    session::check_input_file("--data", &c.data)?;
     if let Some(sd) = c.gauge_noise_sd {
         anyhow::ensure!(
             sd.is_finite() && sd > 0.0,
             "--gauge-noise-sd must be a positive number of microstrain, got {sd}"
         );
     }
+    Ok((lo, hi))
+}
+
+/// The `--gap-prior` value `lo,hi` (in), with 0 <= lo < hi; the message names the flag, the
+/// form and what it got.
+fn gap_prior(values: &[String]) -> Result<(f64, f64)> {
+    let [value] = values else {
+        anyhow::bail!(
+            "--gap-prior takes one value `lo,hi` (comma-separated, no space: \
+             `--gap-prior {}`), got {} values `{}`",
+            values.join(","),
+            values.len(),
+            values.join(" ")
+        )
+    };
+    let numbers = value
+        .split(',')
+        .map(|t| {
+            t.trim()
+                .parse::<f64>()
+                .map_err(|_| anyhow::anyhow!("--gap-prior {value}: `{t}` is not a number"))
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    let [lo, hi] = numbers[..] else {
+        anyhow::bail!(
+            "--gap-prior must be two numbers `lo,hi` (in), got {} in `{value}`",
+            numbers.len()
+        )
+    };
+    anyhow::ensure!(
+        lo.is_finite() && hi.is_finite() && lo >= 0.0 && lo < hi,
+        "--gap-prior must be lo,hi with 0 <= lo < hi (in), got {lo},{hi}"
+    );
     Ok((lo, hi))
 }
 
@@ -141,6 +163,10 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     let rec = gate::read_record(&c.data, model, &ingest)?;
     let cfg = gate::close_loop_config(cfg, &rec);
     let out = close_loop(&rec, &calibrator, &cfg)?;
+    let warnings = session::close_loop_warnings(&out, &format!("--gap-prior {lo},{hi}"));
+    for w in &warnings {
+        log::warn!("{w}");
+    }
     let inputs = ReportInputs {
         config: c
             .config
@@ -152,7 +178,7 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
         gap_prior_in: (lo, hi),
         seed: calibrator.calibration_config().seed,
         theta_true: None,
-        warnings: vec![],
+        warnings,
     };
     let fatigue = loop_fatigue(&out, &rec, calibrator.calibration_config().seed)?;
     let files = bamudi_gate::report::closeloop::write_report(
@@ -208,8 +234,7 @@ fn loop_fatigue(out: &CloseLoopOutcome, rec: &MeasuredRecord, seed: u64) -> Resu
 fn loop_config(c: &CloseLoopCmd) -> Result<CloseLoopConfig> {
     let cfg: CloseLoopConfig = match &c.config {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("--config: reading {}", p.display()))?;
+            let text = session::read_input_text("--config", p)?;
             let cfg: CloseLoopConfig = toml::from_str(&text)
                 .with_context(|| format!("--config: parsing {}", p.display()))?;
             cfg.validate()
@@ -241,8 +266,7 @@ fn calibration_config(c: &CloseLoopCmd) -> Result<Option<CalibrationConfig>> {
     let Some(p) = &c.calibration_config else {
         return Ok(None);
     };
-    let text = std::fs::read_to_string(p)
-        .with_context(|| format!("--calibration-config: reading {}", p.display()))?;
+    let text = session::read_input_text("--calibration-config", p)?;
     let cfg = CalibrationConfig::from_toml_str(&text)
         .with_context(|| format!("--calibration-config {}", p.display()))?;
     Ok(Some(cfg))
@@ -260,7 +284,7 @@ fn read_tolerances(
         return Ok(Vec::new());
     };
     let label = format!("--tolerances {}", p.display());
-    let text = std::fs::read_to_string(p).with_context(|| format!("{label}: reading"))?;
+    let text = session::read_input_text("--tolerances", p)?;
     let file: ToleranceFile = toml::from_str(&text).with_context(|| label.clone())?;
     let mode = cal_cfg.map_or(CoefficientMode::Marginal, |c| c.coefficients);
     check_tolerance_specs(&file.tolerances, mode, &label)?;

@@ -19,7 +19,7 @@ pub struct GateArgs {
     pub gate: Option<PathBuf>,
     /// Override of the mesh element size (in) of the gate (coarser = faster, less accurate).
     #[arg(long, global = true, allow_negative_numbers = true,
-          value_parser = number_in(0.0, 240.0, Bound::Open, "in"))]
+          value_parser = number_in(0.0, mitergate::MAX_ELEMENT_SIZE_IN, Bound::Open, "in"))]
     pub element_size: Option<f64>,
     /// Your own gate as a finite-element deck (Abaqus / CalculiX `.inp`), with
     /// `--import-spec` (docs/mitergate.md, "Bring your own gate"); instead of `--gate`.
@@ -83,17 +83,14 @@ pub fn number_in(
     }
 }
 
-/// Reads the gate configuration (file or embedded default) with the element-size override.
+/// Reads the gate configuration (file or embedded default) with the element-size override
+/// ([`session::gate_config`](bamudi_gate::session::gate_config), as Python's `Gate`).
 pub fn gate_config(args: &GateArgs) -> Result<GateConfig> {
-    let mut cfg = match &args.gate {
-        Some(p) => GateConfig::from_file(p).with_context(|| format!("--gate {}", p.display()))?,
-        None => GateConfig::default(),
-    };
-    if let Some(h) = args.element_size {
-        cfg.mesh.element_size = h;
-        cfg.validate().context("--element-size")?;
-    }
-    Ok(cfg)
+    Ok(bamudi_gate::session::gate_config(
+        args.gate.as_deref(),
+        args.element_size,
+        ("--gate", "--element-size"),
+    )?)
 }
 
 /// The gate of the arguments: a deck with its import spec, or a configuration.

@@ -61,10 +61,11 @@ pub struct FieldArgs {
     #[arg(long, default_value_t = 90.0, allow_negative_numbers = true,
           value_parser = number_in(0.0, 10_000.0, Bound::Open, "in"))]
     pub gap: f64,
-    /// Gap at the end of the record (in) for the `gap-growth` effect.
-    #[arg(long, default_value_t = 130.0, allow_negative_numbers = true,
+    /// Gap at the end of the record (in) for the `gap-growth` effect (default 130; refused
+    /// without it).
+    #[arg(long, allow_negative_numbers = true,
           value_parser = number_in(0.0, 10_000.0, Bound::Open, "in"))]
-    pub final_gap: f64,
+    pub final_gap: Option<f64>,
     /// White gauge noise (microstrain), in [0, 1000].
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true,
           value_parser = number_in(0.0, 1000.0, Bound::Closed, "microstrain"))]
@@ -147,12 +148,15 @@ fn experiments(a: &ExperimentsArgs, gate: &GateArgs, seed: Option<u64>) -> Resul
 }
 
 fn field(a: &FieldArgs, gate: &GateArgs, seed: Option<u64>) -> Result<()> {
-    let mut effects = FieldEffects::default();
-    for name in &a.effect {
-        effects = effects
-            .with_preset(name.trim(), a.final_gap)
-            .context("--effect")?;
-    }
+    let mut effects = FieldEffects::from_presets(&a.effect, a.final_gap).map_err(|e| match e {
+        mitergate::GateError::InvalidInput { what, reason } if what == "final_gap" => {
+            anyhow::anyhow!("--final-gap: {reason}")
+        }
+        mitergate::GateError::InvalidInput { reason, .. } => {
+            anyhow::anyhow!("--effect {}: {reason}", a.effect.join(","))
+        }
+        e => anyhow::anyhow!("--effect: {e}"),
+    })?;
     if let Some(p) = a.missing {
         effects.missing = Some(MissingValues { probability: p });
     }

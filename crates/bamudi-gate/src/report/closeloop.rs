@@ -362,7 +362,8 @@ pub fn write_report(
     bamudi::data::write_atomic(&md, text.as_bytes())?;
     files.push(md);
     let js = dir.join("results.json");
-    let json = results_json(out, fatigue, &js.display().to_string())?;
+    let warnings = inputs.map_or(&[][..], |i| &i.warnings[..]);
+    let json = results_json(out, fatigue, warnings, &js.display().to_string())?;
     bamudi::data::write_atomic(&js, json.as_bytes())?;
     files.push(js);
     if let Some(f) = fatigue {
@@ -395,11 +396,14 @@ pub fn write_report(
 }
 
 /// The text of `results.json`: the loop's report, the declared tolerances the final
-/// calibration read (`tolerances`, when declared) and the record's fatigue (`record_fatigue`,
-/// when given); `context` names the output in an error.
+/// calibration read (`tolerances`, when declared), the record's fatigue (`record_fatigue`,
+/// when given) and the front end's `warnings` (when any, e.g. the final posterior pressed
+/// against a prior bound, [`close_loop_warnings`](crate::session::close_loop_warnings));
+/// `context` names the output in an error.
 pub fn results_json(
     out: &CloseLoopOutcome,
     fatigue: Option<&RecordFatigue>,
+    warnings: &[String],
     context: &str,
 ) -> Result<String> {
     let serde = |e: serde_json::Error| GateAppError::Serde {
@@ -416,6 +420,9 @@ pub fn results_json(
         if !tolerances.is_empty() {
             let t = serde_json::to_value(tolerances).map_err(serde)?;
             map.insert("tolerances".into(), t);
+        }
+        if !warnings.is_empty() {
+            map.insert("warnings".into(), serde_json::json!(warnings));
         }
     }
     serde_json::to_string_pretty(&value).map_err(serde)

@@ -17,6 +17,13 @@
 //!   results directory or a staging directory is a failure) and every input file is
 //!   byte-identical (so a previous good result in `--out` survives a failed run).
 //!
+//! * the error line prints each cause once (no `(os error N)` twice, no piece repeated as in
+//!   `--data X: X:`).
+//!
+//! A few inputs are right to accept with a named warning (a gap prior that excludes the
+//! data): those cases ([`Expect::Warn`]) must exit 0, name their culprits on stderr, and
+//! create nothing but their `--out` directory.
+//!
 //! All cases run (two at a time) before the single assertion, which lists every failing case
 //! with its command line, what went wrong and an excerpt of stderr.
 //!
@@ -84,6 +91,11 @@ const TRUE_GAP_IN: f64 = 90.0;
 const EXPERIMENT_ROWS: usize = 20;
 const RECORD_ROWS: usize = 48;
 
+/// Rows of the long base record (a week hourly): the fewest the close loop runs on (its
+/// calibration, validation and test windows need 30 rows each at the default fractions), for
+/// the cases that must run the loop to its end.
+const LONG_RECORD_ROWS: usize = 168;
+
 /// A valid `calibrate` configuration (the round trip's: exact linear estimator, 49 grid points).
 const CAL_TOML: &str = "gap_prior = [81.0, 105.0]\n[calibration]\ntheta_grid_points = 49\n\
                         gp_restarts = 1\n[calibration.estimator]\nkind = \"exact_linear\"\n";
@@ -107,6 +119,18 @@ enum Stage {
     NeedsGate,
 }
 
+/// How a case must end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Expect {
+    /// A refusal: non-zero exit, nothing left behind.
+    Refuse,
+    /// Accepted with a named warning: exit 0; only `out` (a directory of the case) is created.
+    Warn {
+        /// The output directory the run may create.
+        out: &'static str,
+    },
+}
+
 /// One bad input.
 struct Case {
     /// Unique; says what is wrong (the case's directory is numbered, so that the name cannot
@@ -120,6 +144,9 @@ struct Case {
     args: Vec<String>,
     /// Substrings stderr must contain.
     culprits: Vec<String>,
+    /// Symbolic links to create: `(path, target)`, both relative to the case directory.
+    links: Vec<(String, String)>,
+    expect: Expect,
 }
 
 impl Case {
@@ -130,7 +157,21 @@ impl Case {
             files: Vec::new(),
             args: args.iter().map(|s| s.to_string()).collect(),
             culprits: culprits.iter().map(|s| s.to_string()).collect(),
+            links: Vec::new(),
+            expect: Expect::Refuse,
         }
+    }
+
+    /// A symbolic link `path` -> `target` (a case on a platform without them is skipped).
+    fn link(mut self, path: &str, target: &str) -> Self {
+        self.links.push((path.to_string(), target.to_string()));
+        self
+    }
+
+    /// The input is right to accept with a warning; the run writes `out`.
+    fn warns(mut self, out: &'static str) -> Self {
+        self.expect = Expect::Warn { out };
+        self
     }
 
     fn file(mut self, path: &str, contents: impl AsRef<[u8]>) -> Self {
@@ -175,6 +216,8 @@ struct Base {
     exps: String,
     /// 48 hourly rows: `time` (ISO 8601), `h_up`, `h_down`, `air_temp_f`, the gauges.
     record: String,
+    /// The same layout over [`LONG_RECORD_ROWS`] hourly rows.
+    long_record: String,
     /// The default gate TOML with 60 in elements.
     gate_toml: String,
 }
@@ -229,20 +272,25 @@ impl Base {
             );
         }
 
-        let mut record = format!("time,h_up,h_down,air_temp_f,{}\n", GAUGES.join(","));
-        for i in 0..RECORD_ROWS {
-            let t = i as f64;
-            let h_up = 600.0 + 100.0 * (0.4 * t).sin();
-            let h_down = 120.0 + 60.0 * (0.3 * t).cos();
-            let air = 50.0 + 10.0 * (2.0 * std::f64::consts::PI * t / 24.0).sin();
-            record += &format!(
-                "2024-01-{:02}T{:02}:00:00Z,{},{}\n",
-                1 + i / 24,
-                i % 24,
-                cells(&[h_up, h_down, air]),
-                cells(&strains(h_up, h_down, 100 + i))
-            );
-        }
+        let record_of = |rows: usize| {
+            let mut record = format!("time,h_up,h_down,air_temp_f,{}\n", GAUGES.join(","));
+            for i in 0..rows {
+                let t = i as f64;
+                let h_up = 600.0 + 100.0 * (0.4 * t).sin();
+                let h_down = 120.0 + 60.0 * (0.3 * t).cos();
+                let air = 50.0 + 10.0 * (2.0 * std::f64::consts::PI * t / 24.0).sin();
+                record += &format!(
+                    "2024-01-{:02}T{:02}:00:00Z,{},{}\n",
+                    1 + i / 24,
+                    i % 24,
+                    cells(&[h_up, h_down, air]),
+                    cells(&strains(h_up, h_down, 100 + i))
+                );
+            }
+            record
+        };
+        let record = record_of(RECORD_ROWS);
+        let long_record = record_of(LONG_RECORD_ROWS);
 
         // the base documents are what the cases assume they are
         let table = bamudi::data::Table::parse(&exps, "exps.csv").expect("base experiments");
@@ -256,6 +304,7 @@ impl Base {
         Self {
             exps,
             record,
+            long_record,
             gate_toml: replace_once(
                 mitergate::gate::DEFAULT_GATE_TOML,
                 "element_size = 12.0",
@@ -380,6 +429,39 @@ fn constant_gauges(csv: &str) -> String {
     out
 }
 
+/// `csv` with CRLF line ends (a file saved on Windows).
+fn crlf(csv: &str) -> String {
+    csv.lines().map(|l| format!("{l}\r\n")).collect()
+}
+
+/// `csv` with the gate open in every row (`h_down` set to `h_up`: no head, no quoin force).
+fn gate_open_everywhere(csv: &str) -> String {
+    let (up, down) = (column_index(csv, "h_up"), column_index(csv, "h_down"));
+    let lines: Vec<String> = csv
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let mut cells: Vec<String> = l.split(',').map(str::to_string).collect();
+            if i > 0 {
+                cells[down] = cells[up].clone();
+            }
+            cells.join(",")
+        })
+        .collect();
+    join_lines(&lines)
+}
+
+/// The first two cells of file line `line` with their commas (`a,b,`): an anchor for
+/// [`with_latin1_byte`] that puts the byte at the start of the line's third cell.
+fn two_cells(csv: &str, line: usize) -> String {
+    let l = csv
+        .lines()
+        .nth(line - 1)
+        .expect("corpus construction: a line");
+    let cells: Vec<&str> = l.splitn(3, ',').collect();
+    format!("{},{},", cells[0], cells[1])
+}
+
 /// UTF-16 little endian with its byte-order mark (what spreadsheets call "Unicode text").
 fn utf16le(text: &str) -> Vec<u8> {
     let mut bytes = vec![0xFF, 0xFE];
@@ -435,6 +517,8 @@ fn corpus(base: &Base, fixture: Option<&Fixture>) -> Vec<Case> {
     cases.extend(close_loop_config_files(base));
     cases.extend(close_loop_tolerance_files(base));
     cases.extend(close_loop_records(base));
+    cases.extend(reality_files());
+    cases.extend(prior_excludes_the_data(base));
     cases.extend(output_paths(base));
     if let Some(fx) = fixture {
         cases.extend(predict_inputs(base, fx));
@@ -736,6 +820,27 @@ fn simulate_field_flags() -> Vec<Case> {
             "effect_unknown",
             &cat(days, &["--effect", "rain"]),
             &["rain", "thermal"],
+        ),
+        // contradictions: `none` with an effect, an effect twice, a final gap nothing uses
+        field(
+            "effect_none_with_another",
+            &cat(days, &["--effect", "none,thermal"]),
+            &["--effect", "`none`"],
+        ),
+        field(
+            "effect_named_twice",
+            &cat(days, &["--effect", "thermal,drift,thermal"]),
+            &["--effect", "`thermal`", "twice"],
+        ),
+        field(
+            "effect_empty_name",
+            &cat(days, &["--effect", "thermal,"]),
+            &["--effect", "empty"],
+        ),
+        field(
+            "final_gap_without_gap_growth",
+            &cat(days, &["--effect", "thermal", "--final-gap", "120"]),
+            &["--final-gap", "gap-growth"],
         ),
     ]
 }
@@ -1110,7 +1215,22 @@ fn calibrate_data_files(base: &Base) -> Vec<Case> {
         data("empty_file", &"", &[]),
         data("header_only", &head(e, 0), &[]),
         data("utf16", &utf16le(e), &[]),
-        data("invalid_utf8", &with_latin1_byte(e, "SG1"), &[]),
+        data(
+            "invalid_utf8",
+            &with_latin1_byte(e, "SG1"),
+            &["line 1", "UTF-8"],
+        ),
+        data(
+            "invalid_utf8_in_a_row",
+            &with_latin1_byte(e, &two_cells(e, 5)),
+            &["line 5", "`SG1`", "UTF-8"],
+        ),
+        // Windows line ends: the lines named are still the file's
+        data(
+            "crlf_text_cell",
+            &crlf(&set_cell(e, 4, "SG2", "abc")),
+            &["line 4", "`SG2`"],
+        ),
         data("semicolon_delimiter", &e.replace(',', ";"), &["`h_up`"]),
         data("tab_delimiter", &e.replace(',', "\t"), &["`h_up`"]),
         data(
@@ -1171,6 +1291,17 @@ fn calibrate_data_files(base: &Base) -> Vec<Case> {
             "overflowing_cell",
             &set_cell(e, 6, "SG7", "1e400"),
             &["line 6", "`SG7`"],
+        ),
+        // finite, but more than any strain gauge reports (10 % strain)
+        data(
+            "absurd_gauge_reading",
+            &set_cell(e, 6, "SG3", "1e300"),
+            &["line 6", "`SG3`", "100000"],
+        ),
+        data(
+            "absurd_negative_gauge_reading",
+            &set_cell(e, 9, "SG5", "-250000"),
+            &["line 9", "`SG5`", "100000"],
         ),
         // rows outside the gate's domain (24 <= h_down <= h_up <= 744 in)
         data(
@@ -1291,6 +1422,12 @@ fn gate_files(base: &Base) -> Vec<Case> {
             &edit("thickness = 0.625", "thickness = -0.625"),
             &["skin_plate.thickness"],
         ),
+        // the command line's limit of --element-size holds in the file too
+        gate(
+            "element_size_above_limit",
+            &edit("element_size = 60.0", "element_size = 1e6"),
+            &["mesh.element_size", "240"],
+        ),
         gate(
             "zero_element_size",
             &edit("element_size = 60.0", "element_size = 0.0"),
@@ -1385,6 +1522,17 @@ fn gate_files(base: &Base) -> Vec<Case> {
                 "name = \"SG2\"\ndirection = [0.0, 0.0, 0.0]",
             ),
             &["direction"],
+        ),
+        // a deck given where a gate TOML goes: the way to import it is named
+        Case::new(
+            "gate_deck_given_as_toml",
+            BeforeGate,
+            &cat(&sim[..6], &["--gate", "deck.inp", "--out", "x.csv"]),
+            &["--gate", "deck.inp", "--gate-inp"],
+        )
+        .file(
+            "deck.inp",
+            "*HEADING\nexported gate\n*NODE\n1, 0.0, 0.0, 0.0\n",
         ),
         Case::new(
             "gate_missing",
@@ -1496,6 +1644,12 @@ fn close_loop_flags(base: &Base) -> Vec<Case> {
             &["--gap-prior"],
         ),
         cl("gap_prior_text", &["--gap-prior", "a,b"], &["--gap-prior"]),
+        // the old two-value form: the flag and the `lo,hi` form are named, not a stray `50`
+        cl(
+            "gap_prior_two_values",
+            &["--gap-prior", "100", "50"],
+            &["--gap-prior", "lo,hi"],
+        ),
         cl(
             "holdout_zero",
             &["--holdout-fraction", "0"],
@@ -1562,6 +1716,22 @@ fn close_loop_flags(base: &Base) -> Vec<Case> {
             &["close-loop", "--data", "nope.csv", "--out", "loop"],
             &["nope.csv"],
         ),
+        // a symbolic-link loop and a broken link are named as such, not as a missing file
+        Case::new(
+            "close_loop_data_symlink_loop",
+            BeforeGate,
+            &["close-loop", "--data", "a.csv", "--out", "loop"],
+            &["--data a.csv", "symbolic links"],
+        )
+        .link("a.csv", "b.csv")
+        .link("b.csv", "a.csv"),
+        Case::new(
+            "close_loop_data_broken_symlink",
+            BeforeGate,
+            &["close-loop", "--data", "rec.csv", "--out", "loop"],
+            &["--data rec.csv", "symbolic link", "gone.csv"],
+        )
+        .link("rec.csv", "gone.csv"),
         // a valid pair, but the gap must stay below the quoin (762 in), which the gate knows
         Case::new(
             "close_loop_gap_prior_outside_the_gate",
@@ -1846,6 +2016,51 @@ fn close_loop_records(base: &Base) -> Vec<Case> {
             &[],
             &["line 3", "`h_down`"],
         ),
+        // finite, but no gauge reads it, no thermometer shows it
+        rec(
+            "gauge_absurd_reading",
+            &set_cell(r, 12, "SG4", "-2e5"),
+            &[],
+            &["line 12", "`SG4`", "100000"],
+        ),
+        rec(
+            "gauge_1e300",
+            &set_cell(r, 30, "SG2", "1e300"),
+            &[],
+            &["line 30", "`SG2`", "100000"],
+        ),
+        rec(
+            "temperature_fault_code",
+            &set_cell(r, 9, "air_temp_f", "-999"),
+            &[],
+            &["line 9", "`air_temp_f`", "degF"],
+        ),
+        // data that cannot inform a calibration, refused before the loop
+        rec(
+            "constant_gauges",
+            &constant_gauges(r),
+            &[],
+            &["`SG1`", "constant"],
+        ),
+        rec(
+            "gate_open_in_every_row",
+            &gate_open_everywhere(r),
+            &[],
+            &["gate open", "`h_up`"],
+        ),
+        // encodings and line ends
+        rec(
+            "invalid_utf8",
+            &with_latin1_byte(r, &two_cells(r, 5)),
+            &[],
+            &["line 5", "`h_down`", "UTF-8"],
+        ),
+        rec(
+            "crlf_gauge_text",
+            &crlf(&set_cell(r, 4, "SG2", "abc")),
+            &[],
+            &["line 4", "`SG2`"],
+        ),
         rec(
             "covariate_text",
             &set_cell(r, 4, "air_temp_f", "warm"),
@@ -1884,7 +2099,12 @@ fn close_loop_records(base: &Base) -> Vec<Case> {
         ),
         // with the default policy every row is dropped; with --impute there is nothing to
         // interpolate from
-        rec("gauge_never_measured", &set_column(r, "SG1", ""), &[], &[]),
+        rec(
+            "gauge_never_measured",
+            &set_column(r, "SG1", ""),
+            &[],
+            &["`SG1`"],
+        ),
         rec(
             "gauge_never_measured_impute",
             &set_column(r, "SG1", ""),
@@ -1898,6 +2118,101 @@ fn close_loop_records(base: &Base) -> Vec<Case> {
             &["recdir"],
         )
         .dir("recdir"),
+    ]
+}
+
+/// `simulate --reality` files (`reality.toml`): the limits of gauge readings and of the mesh
+/// hold for what a reality declares, checked before any gate is built.
+fn reality_files() -> Vec<Case> {
+    let reality = |name: &str, toml: &str, culprits: &[&str]| {
+        Case::new(
+            &format!("reality_{name}"),
+            BeforeGate,
+            &[
+                "simulate",
+                "experiments",
+                "--scenario",
+                "1",
+                "--n",
+                "5",
+                "--reality",
+                "reality.toml",
+                "--out",
+                "x.csv",
+            ],
+            &cat(&["reality.toml"], culprits),
+        )
+        .file("reality.toml", toml)
+    };
+    vec![
+        reality(
+            "sensor_offset_absurd",
+            "[[sensors]]\ngauge = \"SG2\"\noffset_microstrain = 1e300\n",
+            &["offset_microstrain", "100000"],
+        ),
+        reality(
+            "sensor_step_absurd",
+            "[[sensors]]\ngauge = \"SG2\"\nstep = { at_fraction = 0.5, size_microstrain = -1e6 }\n",
+            &["step.size_microstrain", "100000"],
+        ),
+        reality(
+            "mesh_above_limit",
+            "mesh_element_size_in = 1e6\n",
+            &["mesh_element_size_in", "240"],
+        ),
+    ]
+}
+
+/// A gap prior that excludes the data (the base data's gap is 90 in): accepted, with the
+/// warning that the posterior is pressed against the prior's upper bound and which way to
+/// widen it, in `calibrate` and in `close-loop` (the loop's final calibration).
+fn prior_excludes_the_data(base: &Base) -> Vec<Case> {
+    let narrow = CAL_TOML.replace("gap_prior = [81.0, 105.0]", "gap_prior = [60.0, 80.0]");
+    vec![
+        Case::new(
+            "calibrate_gap_prior_excludes_the_data",
+            NeedsGate,
+            &[
+                "calibrate",
+                "--config",
+                "cal.toml",
+                "--data",
+                "data.csv",
+                "--out",
+                "out",
+            ],
+            &[
+                "cal.toml",
+                "`gap_prior`",
+                "upper bound",
+                "raise the upper bound above 80",
+            ],
+        )
+        .file("cal.toml", narrow)
+        .file("data.csv", &base.exps)
+        .warns("out"),
+        Case::new(
+            "close_loop_gap_prior_excludes_the_data",
+            NeedsGate,
+            &[
+                "close-loop",
+                "--data",
+                "record.csv",
+                "--gap-prior",
+                "60,80",
+                "--max-experiments",
+                "30",
+                "--out",
+                "loop",
+            ],
+            &[
+                "--gap-prior 60,80",
+                "upper bound",
+                "raise the upper bound above 80",
+            ],
+        )
+        .file("record.csv", &base.long_record)
+        .warns("loop"),
     ]
 }
 
@@ -2451,6 +2766,21 @@ fn run(args: &[String], cwd: &Path, limit: Duration) -> Run {
     }
 }
 
+/// Creates the case's symbolic links under `dir`; `false` where the platform has none.
+fn write_links(dir: &Path, links: &[(String, String)]) -> bool {
+    #[cfg(unix)]
+    {
+        for (path, target) in links {
+            std::os::unix::fs::symlink(target, dir.join(path)).expect("creating a symbolic link");
+        }
+        true
+    }
+    #[cfg(not(unix))]
+    {
+        links.is_empty()
+    }
+}
+
 /// Creates the case's inputs under `dir`.
 fn write_inputs(dir: &Path, files: &[(String, Vec<u8>)]) {
     std::fs::create_dir_all(dir).expect("creating a case directory");
@@ -2517,6 +2847,9 @@ fn excerpt(text: &str) -> String {
 /// Runs one case in `dir`; `None` when it is a clean, named refusal.
 fn check_case(case: &Case, dir: &Path) -> Option<String> {
     write_inputs(dir, &case.files);
+    if !write_links(dir, &case.links) {
+        return None; // no symbolic links on this platform
+    }
     let before = listing(dir);
     let r = run(&case.command_line(), dir, CASE_TIMEOUT);
     let mut problems = Vec::new();
@@ -2526,10 +2859,18 @@ fn check_case(case: &Case, dir: &Path) -> Option<String> {
             CASE_TIMEOUT.as_secs()
         ));
     }
-    match r.code {
-        Some(0) => problems.push("exit status 0: the bad input was accepted".into()),
-        None if !r.timed_out => problems.push("ended by a signal (a crash)".into()),
+    match (r.code, case.expect) {
+        (Some(0), Expect::Refuse) => {
+            problems.push("exit status 0: the bad input was accepted".into())
+        }
+        (Some(c), Expect::Warn { .. }) if c != 0 => problems.push(format!(
+            "exit status {c}: the input must be accepted with a warning"
+        )),
+        (None, _) if !r.timed_out => problems.push("ended by a signal (a crash)".into()),
         _ => {}
+    }
+    if let Some(p) = repeated_cause(&r.stderr) {
+        problems.push(p);
     }
     for word in ["panicked", "RUST_BACKTRACE"] {
         if r.stderr.contains(word) {
@@ -2553,7 +2894,11 @@ fn check_case(case: &Case, dir: &Path) -> Option<String> {
         problems.push("the gate was built before the refusal (validate first)".into());
     }
     let after = listing(dir);
-    for extra in after.difference(&before) {
+    let written = |entry: &str| match case.expect {
+        Expect::Warn { out } => entry.starts_with(&format!("{out}/")),
+        Expect::Refuse => false,
+    };
+    for extra in after.difference(&before).filter(|e| !written(e)) {
         problems.push(format!("left behind: {extra}"));
     }
     for gone in before.difference(&after) {
@@ -2582,6 +2927,20 @@ fn check_case(case: &Case, dir: &Path) -> Option<String> {
     }
     text += &format!("    stderr:\n      | {}\n", excerpt(&r.stderr));
     Some(text)
+}
+
+/// What is wrong with the `error: ` line of `stderr` when it prints a cause twice: an
+/// `(os error N)` more than once, or the same piece twice in a row (`--data X: X: ...`).
+fn repeated_cause(stderr: &str) -> Option<String> {
+    let line = stderr.lines().find(|l| l.starts_with("error: "))?;
+    if line.matches("(os error").count() > 1 {
+        return Some(format!("the error line prints the OS error twice: {line}"));
+    }
+    let pieces: Vec<&str> = line.split(": ").collect();
+    pieces
+        .windows(2)
+        .find(|w| w[0].trim() == w[1].trim() || w[0].ends_with(&format!(" {}", w[1].trim())))
+        .map(|w| format!("the error line repeats `{}`: {line}", w[1]))
 }
 
 /// Runs every case, [`WORKERS`] at a time, each in `root/case_NNN`; the failures in corpus

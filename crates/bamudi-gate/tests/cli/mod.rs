@@ -162,6 +162,14 @@ fn bad_arguments_and_files_are_clear_errors() {
         ],
         &["none.json"],
     );
+    // the help shows `--gap-prior`'s default in the form the flag takes (`lo,hi`)
+    let o = bamudi(&["close-loop", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        help.contains("[default: 40,200]") && !help.contains("[default: 40 200]"),
+        "{help}"
+    );
 }
 
 #[test]

@@ -37,6 +37,61 @@ fn canonical_unit(unit: &str) -> String {
     }
 }
 
+/// The temperatures (°C) a covariate declared in a temperature unit may read: the air, water
+/// and steel around a structure outdoors. The lowest and highest air temperatures ever
+/// recorded on Earth are −89 °C and +57 °C, water is liquid between 0 and 100 °C, and sunlit
+/// steel stays well below 100 °C; a reading outside [−100, 100] °C is a fault code (−999),
+/// a wrong declared unit (kelvin declared as °C) or an overflow, not a temperature.
+pub const TEMPERATURE_RANGE_C: (f64, f64) = (-100.0, 100.0);
+
+/// [`TEMPERATURE_RANGE_C`] in a temperature unit (`None` for another unit).
+///
+/// ```
+/// use bamudi::closeloop::temperature_range;
+/// assert_eq!(temperature_range("degF"), Some((-148.0, 212.0)));
+/// assert_eq!(temperature_range("in"), None);
+/// ```
+pub fn temperature_range(unit: &str) -> Option<(f64, f64)> {
+    let (lo, hi) = TEMPERATURE_RANGE_C;
+    match canonical_unit(unit).as_str() {
+        "degc" => Some((lo, hi)),
+        "degf" => Some((lo * 1.8 + 32.0, hi * 1.8 + 32.0)),
+        "k" => Some((lo + 273.15, hi + 273.15)),
+        _ => None,
+    }
+}
+
+/// Refuses a covariate value declared in a temperature unit (`units`, the configuration's
+/// `column_units`) outside [`temperature_range`], naming the file, line and column.
+pub(crate) fn check_covariate_values(
+    rec: &MeasuredRecord,
+    units: &BTreeMap<String, String>,
+) -> crate::Result<()> {
+    for (k, name) in rec.covariate_names.iter().enumerate() {
+        let Some(unit) = units.get(name) else {
+            continue;
+        };
+        let Some((lo, hi)) = temperature_range(unit) else {
+            continue;
+        };
+        let col = rec.covariates.column(k);
+        if let Some(i) = (0..rec.len()).find(|&i| !(lo..=hi).contains(&col[i])) {
+            return Err(crate::BamudiError::Csv {
+                file: rec.file.clone(),
+                row: rec.source_lines[i] as usize,
+                column: name.clone(),
+                reason: format!(
+                    "value {:?} {unit} is outside [{lo}, {hi}] {unit} ([{}, {}] °C, the \
+                     temperatures of a structure's surroundings): a fault code, a wrong \
+                     declared unit (`column_units`) or an overflow?",
+                    col[i], TEMPERATURE_RANGE_C.0, TEMPERATURE_RANGE_C.1
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Whether a unit measures nothing a difference would make sense of (a phase, a count).
 fn dimensionless(unit: &str) -> bool {
     matches!(unit.trim(), "" | "1" | "-" | "none" | "dimensionless")

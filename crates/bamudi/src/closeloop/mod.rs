@@ -69,8 +69,8 @@ pub use effect::{
 };
 pub use effects::LinearTerm;
 pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
-pub use features::{Features, is_temperature_unit};
-pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, parse_csv, read_csv};
+pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperature_range};
+pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 pub use track::{ThetaTrack, TrackAlarm, TrackAnchor, TrackConfig, TrackPoint, TrackState};
 
@@ -327,6 +327,7 @@ pub fn close_loop_with(
         ));
     }
     cfg.check_columns(&rec.file, &rec.covariate_names)?;
+    features::check_covariate_values(rec, &cfg.column_units)?;
     let started = std::time::Instant::now();
     let w = Windows::of(rec, cfg)?;
     let feats = Features::new(rec, cfg.load.as_ref(), &cfg.column_units);

@@ -124,13 +124,10 @@ impl IngestConfig {
     }
 }
 
-/// Reads a measured CSV file.
+/// Reads a measured CSV file ([`Table::read`]: a file that is not UTF-8 is refused with its
+/// line and column).
 pub fn read_csv(path: &std::path::Path, cfg: &IngestConfig) -> Result<MeasuredRecord> {
-    let text = std::fs::read_to_string(path).map_err(|source| BamudiError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
-    parse_csv(&text, &path.display().to_string(), cfg)
+    from_table(&Table::read(path)?, cfg)
 }
 
 /// Column positions of a record's roles in a table.
@@ -173,8 +170,13 @@ impl Columns {
 /// assert!(err.to_string().contains("line 3"), "{err}"); // time does not increase
 /// ```
 pub fn parse_csv(text: &str, file: &str, cfg: &IngestConfig) -> Result<MeasuredRecord> {
-    let t = Table::parse(text, file)?;
-    let cols = Columns::locate(&t, cfg)?;
+    from_table(&Table::parse(text, file)?, cfg)
+}
+
+/// The measured record of a parsed table (e.g. one whose values a caller has checked first).
+pub fn from_table(t: &Table, cfg: &IngestConfig) -> Result<MeasuredRecord> {
+    let file = t.file();
+    let cols = Columns::locate(t, cfg)?;
     if t.is_empty() {
         return Err(BamudiError::Csv {
             file: file.into(),
@@ -183,7 +185,7 @@ pub fn parse_csv(text: &str, file: &str, cfg: &IngestConfig) -> Result<MeasuredR
             reason: "no data rows".into(),
         });
     }
-    let (time_abs, numeric_time) = times(&t, cols.time)?;
+    let (time_abs, numeric_time) = times(t, cols.time)?;
     let number = |i, c| t.number(i, c, Empty::Refuse).map(|v| v.unwrap_or(f64::NAN));
     let n = t.len();
     let (ni, ng, nc) = (cols.inputs.len(), cols.gauges.len(), cols.covariates.len());
@@ -201,7 +203,7 @@ pub fn parse_csv(text: &str, file: &str, cfg: &IngestConfig) -> Result<MeasuredR
             cov[(i, j)] = number(i, c)?;
         }
     }
-    let (keep, dropped, imputed) = apply_missing(&t, cfg, &time_abs, &mut y, ng)?;
+    let (keep, dropped, imputed) = apply_missing(t, cfg, &time_abs, &mut y, ng)?;
     let t0 = time_abs[keep[0]];
     Ok(MeasuredRecord {
         file: file.into(),
@@ -280,14 +282,19 @@ fn apply_missing(
         reason: reason.into(),
     };
     let (mut keep, mut imputed): (Vec<usize>, usize) = ((0..n).collect(), 0);
+    // a gauge never read is named whatever the policy (dropping would drop every row)
+    if let Some(j) = (0..ng).find(|&j| (0..n).all(|i| y[i * ng + j].is_none())) {
+        return Err(whole(
+            "every value is missing: the gauge has no reading in any row; fix its logging \
+             or drop it (and its gauge in the gate file)",
+            &cfg.gauge_columns[j],
+        ));
+    }
     match cfg.missing {
         MissingPolicy::Drop => keep.retain(|&i| (0..ng).all(|j| y[i * ng + j].is_some())),
         MissingPolicy::Interpolate => {
             for j in 0..ng {
                 let valid: Vec<usize> = (0..n).filter(|&i| y[i * ng + j].is_some()).collect();
-                if valid.is_empty() {
-                    return Err(whole("every value is missing", &cfg.gauge_columns[j]));
-                }
                 for i in 0..n {
                     if y[i * ng + j].is_none() {
                         y[i * ng + j] = Some(interpolate(time, y, ng, j, &valid, i));
@@ -298,7 +305,11 @@ fn apply_missing(
         }
     }
     if keep.is_empty() {
-        return Err(whole("every row has a missing gauge value", "-"));
+        return Err(whole(
+            "every row has a missing gauge value (no row has all of them); impute the gaps \
+             (`--impute`) or drop the gauges that miss most",
+            &cfg.gauge_columns.join(", "),
+        ));
     }
     let dropped = n - keep.len();
     Ok((keep, dropped, imputed))

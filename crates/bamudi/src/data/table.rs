@@ -28,13 +28,26 @@ pub struct Table {
 }
 
 impl Table {
-    /// Reads and parses a CSV file.
+    /// Reads and parses a CSV file. A file that is not UTF-8 is refused with the line and
+    /// column of its first bad byte ([`read_text`](super::read_text)).
+    ///
+    /// ```
+    /// let path = std::env::temp_dir().join("bamudi_doc_latin1.csv");
+    /// std::fs::write(&path, b"a,b\n1,2\n3,4\xb5\n").unwrap();
+    /// let e = bamudi::data::Table::read(&path).unwrap_err().to_string();
+    /// assert!(e.contains("line 3, column `b`") && e.contains("0xB5"), "{e}");
+    /// ```
     pub fn read(path: &std::path::Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| BamudiError::Io {
-            path: path.display().to_string(),
+        let file = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| BamudiError::Io {
+            path: file.clone(),
             source,
         })?;
-        Self::parse(&text, &path.display().to_string())
+        let text = super::utf8(&bytes).map_err(|bad| {
+            let column = csv_column_at(&bytes, &bad);
+            csv_error(&file, bad.line as u64, &column, bad.reason())
+        })?;
+        Self::parse(text, &file)
     }
 
     /// Parses CSV text; `file` labels the errors. Fields are trimmed.
@@ -47,6 +60,10 @@ impl Table {
     /// assert!(e.contains("doc.csv") && e.contains("line 1") && e.contains("duplicate"), "{e}");
     /// let e = Table::parse("a,b\n1,2\n3\n", "doc.csv").unwrap_err().to_string();
     /// assert!(e.contains("line 3"), "{e}");
+    /// let t = Table::parse("a,b\r\n1,2\r\n\r\n3,4\r\n", "doc.csv").unwrap(); // CRLF, a blank line
+    /// assert_eq!((t.line(0), t.line(1)), (2, 4));
+    /// let t = Table::parse("a,b\r1,2\r3,4\r", "doc.csv").unwrap(); // classic-Mac line ends
+    /// assert_eq!((t.line(0), t.line(1)), (2, 3));
     /// ```
     pub fn parse(text: &str, file: &str) -> Result<Self> {
         let mut rdr = csv::ReaderBuilder::new()
@@ -60,13 +77,14 @@ impl Table {
             .map(str::to_string)
             .collect();
         check_header(file, &header)?;
+        let mut counter = LineCounter::new(text);
         let (mut rows, mut lines) = (Vec::new(), Vec::new());
         for rec in rdr.records() {
             let rec = rec.map_err(|e| {
-                let line = e.position().map_or(0, |p| p.line());
+                let line = e.position().map_or(0, |p| counter.line_at(p.byte()));
                 csv_error(file, line, "-", e.to_string())
             })?;
-            let line = rec.position().map_or(0, |p| p.line());
+            let line = rec.position().map_or(0, |p| counter.line_at(p.byte()));
             if rec.len() != header.len() {
                 let reason = format!("{} fields, the header has {}", rec.len(), header.len());
                 return Err(csv_error(file, line, "-", reason));
@@ -144,6 +162,36 @@ impl Table {
         }
     }
 
+    /// Refuses a value of the columns `names` whose magnitude exceeds `limit` (`unit` and
+    /// `why` complete the message, which names the file, line and column and the allowed
+    /// range). Empty cells and cells that are not numbers are left to [`number`](Self::number).
+    ///
+    /// ```
+    /// use bamudi::data::Table;
+    /// let t = Table::parse("g\n12.5\n1e300\n", "doc.csv").unwrap();
+    /// let e = t.check_magnitude(&["g"], 1e5, "microstrain", "no gauge reads that").unwrap_err();
+    /// assert!(e.to_string().contains("line 3, column `g`") && e.to_string().contains("100000"));
+    /// ```
+    pub fn check_magnitude(&self, names: &[&str], limit: f64, unit: &str, why: &str) -> Result<()> {
+        for name in names {
+            let c = self.column(name)?;
+            for i in 0..self.len() {
+                let cell = self.cell(i, c);
+                if let Ok(v) = cell.parse::<f64>()
+                    && v.is_finite()
+                    && v.abs() > limit
+                {
+                    let reason = format!(
+                        "value `{cell}` {unit} is outside the allowed range [-{limit}, {limit}] \
+                         {unit}: {why}"
+                    );
+                    return Err(self.error_at(i, c, reason));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The named columns as a `rows x names.len()` matrix (`NaN` for missing values when
     /// `empty` allows them).
     ///
@@ -172,6 +220,42 @@ impl Table {
     }
 }
 
+/// File lines of records, counted from their byte offsets (in increasing order). The
+/// reader's own line count is not used: it counts `\n` only, so after a CRLF line end it puts
+/// the next record on the previous line, and in a file with classic-Mac `\r` line ends every
+/// record on line 1. Here `\r\n`, `\n` and a lone `\r` each end a line.
+struct LineCounter<'a> {
+    bytes: &'a [u8],
+    /// Bytes before `at` are counted; `line` is the line of byte `at`.
+    at: usize,
+    line: u64,
+}
+
+impl<'a> LineCounter<'a> {
+    fn new(text: &'a str) -> Self {
+        Self {
+            bytes: text.as_bytes(),
+            at: 0,
+            line: 1,
+        }
+    }
+
+    /// The line of the record that starts at byte `start` (line ends before it skipped).
+    fn line_at(&mut self, start: u64) -> u64 {
+        let b = self.bytes;
+        let mut end = usize::try_from(start).unwrap_or(b.len()).min(b.len());
+        while end < b.len() && matches!(b[end], b'\r' | b'\n') {
+            end += 1;
+        }
+        for i in self.at..end.max(self.at) {
+            let ends_line = b[i] == b'\n' || (b[i] == b'\r' && b.get(i + 1) != Some(&b'\n'));
+            self.line += u64::from(ends_line);
+        }
+        self.at = end.max(self.at);
+        self.line
+    }
+}
+
 fn csv_error(file: &str, line: u64, column: &str, reason: String) -> BamudiError {
     BamudiError::Csv {
         file: file.to_string(),
@@ -179,6 +263,32 @@ fn csv_error(file: &str, line: u64, column: &str, reason: String) -> BamudiError
         column: column.to_string(),
         reason,
     }
+}
+
+/// The header name of the column holding the bad byte `bad` of a CSV file (`-` on the header
+/// line, past the header, or when the header itself is not UTF-8): fields are counted by
+/// their commas, which is exact for the unquoted files the tools write.
+fn csv_column_at(bytes: &[u8], bad: &super::BadUtf8) -> String {
+    let header_end = bytes
+        .iter()
+        .position(|b| *b == b'\n')
+        .unwrap_or(bytes.len());
+    let (Ok(header), true) = (std::str::from_utf8(&bytes[..header_end]), bad.line > 1) else {
+        return "-".into();
+    };
+    let line_start = bytes[..bad.offset]
+        .iter()
+        .rposition(|b| *b == b'\n')
+        .map_or(0, |p| p + 1);
+    let field = bytes[line_start..bad.offset]
+        .iter()
+        .filter(|b| **b == b',')
+        .count();
+    header
+        .trim_end_matches('\r')
+        .split(',')
+        .nth(field)
+        .map_or("-".into(), |h| h.trim().to_string())
 }
 
 fn check_header(file: &str, header: &[String]) -> Result<()> {

@@ -429,6 +429,9 @@ pub enum GridWarning {
     AtPriorBound {
         /// The bound.
         bound: f64,
+        /// `true` for the upper bound (the data may favour a larger value), `false` for the
+        /// lower one.
+        upper: bool,
         /// Density at the bound over the peak density.
         density_ratio: f64,
     },
@@ -459,14 +462,21 @@ impl std::fmt::Display for GridWarning {
         match self {
             Self::AtPriorBound {
                 bound,
+                upper,
                 density_ratio,
-            } => write!(
-                f,
-                "the posterior density at the prior bound {bound} is {:.0} % of its peak: the \
-                 prior cuts the posterior off, the data may favour a value beyond it, and the \
-                 bound decides the answer; widen the prior",
-                100.0 * density_ratio
-            ),
+            } => {
+                let (side, beyond, widen) = match upper {
+                    true => ("upper", "a larger value", "raise the upper bound above"),
+                    false => ("lower", "a smaller value", "lower the lower bound below"),
+                };
+                write!(
+                    f,
+                    "the posterior density at the prior's {side} bound {bound} is {:.0} % of its \
+                     peak: the posterior is pressed against the bound, the data may favour \
+                     {beyond}, and the bound decides the answer; {widen} {bound}",
+                    100.0 * density_ratio
+                )
+            }
             Self::UnderResolved { ci_width, spacing } => write!(
                 f,
                 "the 95 % interval ({ci_width:.3} wide) spans fewer than {MIN_RESOLVED_SPACINGS} \
@@ -491,7 +501,8 @@ impl GridPosterior {
     /// assert!(matches!(w[..], [GridWarning::UnderResolved { .. }]));
     /// let edge: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 40.0) / 4.0f64).powi(2)).collect();
     /// let w = GridPosterior::new(theta.clone(), edge).unwrap().warnings((0.0, 40.0));
-    /// assert!(matches!(w[..], [GridWarning::AtPriorBound { bound: 40.0, .. }]));
+    /// assert!(matches!(w[..], [GridWarning::AtPriorBound { bound: 40.0, upper: true, .. }]));
+    /// assert!(w[0].to_string().contains("raise the upper bound above 40"));
     /// let fine: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 20.0) / 3.0f64).powi(2)).collect();
     /// assert!(GridPosterior::new(theta, fine).unwrap().warnings((0.0, 40.0)).is_empty());
     /// ```
@@ -511,11 +522,13 @@ impl GridPosterior {
             ),
         ];
         let tol = 1e-9 * (prior.1 - prior.0).abs().max(1.0);
-        for ((t, d), bound) in ends.into_iter().zip([prior.0, prior.1]) {
+        for (((t, d), bound), upper) in ends.into_iter().zip([prior.0, prior.1]).zip([false, true])
+        {
             let density_ratio = d / peak;
             if (t - bound).abs() <= tol && density_ratio > BOUND_DENSITY_FRACTION {
                 out.push(GridWarning::AtPriorBound {
                     bound,
+                    upper,
                     density_ratio,
                 });
             }

@@ -141,6 +141,35 @@ fn a_declared_column_the_record_lacks_is_an_error_naming_key_and_file() {
     assert!(close_loop(&rec, &cal, &empty).is_err());
 }
 
+/// A covariate declared in a temperature unit must read a temperature of a structure's
+/// surroundings ([`bamudi::closeloop::TEMPERATURE_RANGE_C`]); a fault code or a wrong unit is
+/// refused before any calibration, naming the file, line and column.
+#[test]
+fn an_absurd_temperature_is_refused_naming_line_and_column() {
+    let mut rec = record_with(&ToyGate::default(), 48, 1, |_, _| 0.0).unwrap();
+    let cal = GridCalibrator::new(ToyGate::default(), (40.0, 200.0));
+    let k = rec
+        .covariate_names
+        .iter()
+        .position(|c| c == "air_temp_f")
+        .unwrap();
+    rec.covariates[(7, k)] = -999.0;
+    let cfg = CloseLoopConfig::default().column_unit("air_temp_f", "degF");
+    let e = close_loop(&rec, &cal, &cfg).unwrap_err().to_string();
+    let line = format!("line {}", rec.source_lines[7]);
+    assert!(
+        e.contains(&line) && e.contains("`air_temp_f`") && e.contains("[-148, 212] degF"),
+        "{e}"
+    );
+    // the same column declared in kelvin: every °F reading is far below 173 K
+    let kelvin = CloseLoopConfig::default().column_unit("air_temp_f", "K");
+    let e = close_loop(&rec, &cal, &kelvin).unwrap_err().to_string();
+    assert!(
+        e.contains("`air_temp_f`") && e.contains("column_units"),
+        "{e}"
+    );
+}
+
 #[test]
 fn units_and_selection_are_read_from_toml() {
     let text = "generic_selection = \"stepwise_cv\"\n[column_units]\nair_temp_f = \"degF\"\n";

@@ -164,7 +164,78 @@ pub const EFFECT_PRESETS: [&str; 7] = [
     "none",
 ];
 
+/// Gap (in) at the end of the record for the `gap-growth` preset when none is given.
+pub const DEFAULT_FINAL_GAP_IN: f64 = 130.0;
+
 impl FieldEffects {
+    /// The effects named in `names` (the presets of [`with_preset`](Self::with_preset)), with
+    /// `final_gap_in` for `gap-growth` ([`DEFAULT_FINAL_GAP_IN`] when `None`). A list that
+    /// contradicts itself is refused, naming the effect: `none` beside another effect, an
+    /// effect named twice, an empty or unknown name, or a final gap given without `gap-growth`
+    /// (it would be silently unused). Errors are [`GateError::InvalidInput`] with `what`
+    /// `effect` or `final_gap`.
+    ///
+    /// ```
+    /// use mitergate::data::field::FieldEffects;
+    /// let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+    /// assert!(FieldEffects::from_presets(&names(&["thermal", "drift"]), None).is_ok());
+    /// let e = FieldEffects::from_presets(&names(&["none", "thermal"]), None).unwrap_err();
+    /// assert!(e.to_string().contains("`none`"), "{e}");
+    /// assert!(FieldEffects::from_presets(&names(&["drift", "drift"]), None).is_err());
+    /// assert!(FieldEffects::from_presets(&names(&["thermal"]), Some(120.0)).is_err());
+    /// ```
+    pub fn from_presets(names: &[String], final_gap_in: Option<f64>) -> Result<Self, GateError> {
+        let bad = |reason: String| GateError::InvalidInput {
+            what: "effect".into(),
+            reason,
+        };
+        let names: Vec<&str> = names.iter().map(|n| n.trim()).collect();
+        if let Some(i) = names.iter().position(|n| n.is_empty()) {
+            return Err(bad(format!(
+                "effect {} of {:?} is empty (a stray comma?); expected one of {}",
+                i + 1,
+                names,
+                EFFECT_PRESETS.join(", ")
+            )));
+        }
+        if let Some(n) = names.iter().find(|n| !EFFECT_PRESETS.contains(n)) {
+            return Err(bad(format!(
+                "unknown effect `{n}`; expected one of {}",
+                EFFECT_PRESETS.join(", ")
+            )));
+        }
+        if names.len() > 1 && names.contains(&"none") {
+            return Err(bad(format!(
+                "`none` cannot be combined with other effects (got {}): name the effects to \
+                 switch on, or `none` alone",
+                names.join(", ")
+            )));
+        }
+        if let Some((i, n)) = names
+            .iter()
+            .enumerate()
+            .find(|(i, n)| names[..*i].contains(n))
+        {
+            return Err(bad(format!(
+                "`{n}` is named twice (positions {} and {})",
+                names[..i].iter().position(|m| m == n).unwrap_or(0) + 1,
+                i + 1
+            )));
+        }
+        if final_gap_in.is_some() && !names.contains(&"gap-growth") {
+            return Err(GateError::InvalidInput {
+                what: "final_gap".into(),
+                reason: "the final gap is used only by the `gap-growth` effect; add it to the \
+                         effects or leave the final gap out"
+                    .into(),
+            });
+        }
+        let final_gap = final_gap_in.unwrap_or(DEFAULT_FINAL_GAP_IN);
+        names
+            .iter()
+            .try_fold(Self::default(), |fx, n| fx.with_preset(n, final_gap))
+    }
+
     /// Switches on one effect with the magnitudes used in `docs/closeloop.md` for 7 gauges:
     /// `thermal` (air temperature, 6 h lag, 0.6-2 microstrain/°F of both signs, zero strain
     /// at 60 °F), `drift` (0.1-0.3 microstrain/day), `offset-jump` (+20 microstrain on gauge 3

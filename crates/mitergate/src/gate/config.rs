@@ -36,6 +36,24 @@ pub struct Geometry {
     pub quoin_normal_angle_deg: f64,
 }
 
+/// Coarsest mesh element size (in) any path accepts (a gate TOML's `mesh.element_size`, the
+/// command line's `--element-size`, Python's `element_size`, a reality's
+/// `mesh_element_size_in`): 240 in (20 ft) leaves the default leaf (762 in high, 696 in long)
+/// three to four elements along each edge, the coarsest mesh that still bends its skin plate
+/// between girders and diaphragms at all; anything coarser is not a discretisation of the gate.
+pub const MAX_ELEMENT_SIZE_IN: f64 = 240.0;
+
+/// Largest strain magnitude (microstrain) a gauge reading may have, on every path that reads
+/// gauge values (the experiments of `calibrate`, the records of the close loop, from a file
+/// or from Python) and every path that makes them (a reality's sensor offsets and drifts).
+/// 100,000 µε is 10 % strain: general-purpose foil strain gauges are rated to 3-5 %
+/// (30,000-50,000 µε) before their grid or bond fails, and even post-yield gauges, made for
+/// tests to rupture, stop at 10-20 %; a gate's structural steel yields near 1,200-1,700 µε
+/// (36-50 ksi at 29,000 ksi). A larger value is not a strain a gauge reported but a unit
+/// mix-up (strain instead of microstrain inverted, a raw count), an overflow or a placeholder
+/// such as 1e300.
+pub const MAX_GAUGE_READING_MICROSTRAIN: f64 = 1e5;
+
 /// The skin plate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -329,11 +347,13 @@ impl GateConfig {
         let m = &self.mesh;
         positive("mesh.element_size", m.element_size)?;
         let min_size = g.quoin_height.max(g.leaf_length) / 2000.0;
-        if m.element_size < min_size {
+        if !(min_size..=MAX_ELEMENT_SIZE_IN).contains(&m.element_size) {
             return invalid(
                 "mesh.element_size",
                 &format!(
-                    "{} in is below the supported minimum {min_size} in",
+                    "{} in must lie in [{min_size}, {MAX_ELEMENT_SIZE_IN}] in (finer than 1/2000 \
+                     of the leaf is not supported; coarser than {MAX_ELEMENT_SIZE_IN} in is no \
+                     discretisation of the gate)",
                     m.element_size
                 ),
             );

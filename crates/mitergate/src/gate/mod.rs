@@ -12,7 +12,10 @@ pub mod mesh;
 mod model;
 mod water;
 
-pub use config::{DEFAULT_GATE_TOML, GateConfig, GaugeLocation, GaugeSpec};
+pub use config::{
+    DEFAULT_GATE_TOML, GateConfig, GaugeLocation, GaugeSpec, MAX_ELEMENT_SIZE_IN,
+    MAX_GAUGE_READING_MICROSTRAIN,
+};
 pub use mesh::{GateMesh, Member};
 pub use model::GateModel;
 pub(crate) use water::check_levels;
