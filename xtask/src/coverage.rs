@@ -67,7 +67,7 @@ pub struct CoverageArgs {
     sbc_hold: bool,
     /// Marginal mode: the coefficients' prior scales, isotropic, shared_per_component or
     /// per_coefficient.
-    #[arg(long, default_value = "shared_per_component")]
+    #[arg(long, default_value = "isotropic")]
     scales: String,
     /// Marginal mode: the coefficients' kernel, module2 or matern52.
     #[arg(long, default_value = "matern52")]
@@ -202,6 +202,11 @@ fn parse_mode(m: &str) -> Result<CoefficientMode> {
     })
 }
 
+/// The running log of a study whose report goes to `json`.
+pub(crate) fn log_path(json: &Path) -> PathBuf {
+    LogWriter::path_for(json)
+}
+
 /// Runs the study (or reads a saved one) and writes `coverage[-tag].md`, `coverage[-tag].svg`,
 /// `sbc[-tag].svg`.
 pub fn run(a: &CoverageArgs) -> Result<()> {
@@ -267,7 +272,7 @@ fn read_parts(paths: &[PathBuf]) -> Result<CoverageReport> {
     Ok(CoverageReport::merge(&reports, logs)?)
 }
 
-fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> {
+pub(crate) fn study(opts: &CoverageOptions, json: Option<&Path>) -> Result<CoverageReport> {
     bamudi_gate::progress::init_logging(false);
     let total = (opts.n_replicates * opts.scenarios.len()) as u64;
     let bar = if std::env::var_os("CI").is_none() {

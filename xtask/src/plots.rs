@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use std::path::Path;
 
 pub(crate) use bamudi_gate::report::plot::Series;
-use bamudi_gate::report::plot::{AFTER, Axes, BAND, BEFORE, TRUTH};
+use bamudi_gate::report::plot::{AFTER, Axes, BAND, BEFORE, NO_DELTA, TRUTH};
 
 /// A labelled polyline in the shared style (an empty label stays out of the legend).
 pub(crate) fn series(label: &str, color: RGBColor, xs: &[f64], ys: &[f64], dashed: bool) -> Series {
@@ -84,15 +84,12 @@ pub fn scenario_plots(
     let d = contact.gate().nu_points.clone();
     let nu = d.len();
     // The paper's plotting conditions (Fig. 15, 17): (738, 360) for S1, (426, 120) for S2.
-    let x = if number == 1 {
-        [738.0, 360.0]
-    } else {
-        [426.0, 120.0]
-    };
+    let x = bamudi_gate::paper::figures::condition(number);
     let truth_f = truth::true_forces(&scenario, contact, x)?;
-    let delta = truth::true_discrepancy(x, &d, scenario.theta_true, scenario.discrepancy_scale);
+    let curve =
+        bamudi_gate::paper::figures::discrepancy_curve(model, cal, &scenario, contact, number)?;
+    let (delta, disc) = (&curve.truth, &curve.band);
     let predictor = cal.predictor(model)?;
-    let disc = predictor.discrepancy(&x)?;
     let resp = predictor.response(&x)?;
     let before = prior_mean_response(model, &x)?;
     let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
@@ -250,59 +247,31 @@ fn normal_force_error(p: &ScenarioPlots<'_>) -> Result<()> {
     )
 }
 
-/// Fig. 21/22: forces at location A (1/4 of the quoin height) over a week of lockages.
+/// Fig. 22: forces at location A (a quarter of the quoin height) over a week of lockages,
+/// with the corrected force's band and the best fit without a discrepancy
+/// ([`bamudi_gate::paper::figures::force_history`], whose numbers the report tabulates).
 fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
     let (dir, res, cal, model, scenario) = (&p.dir, p.res, p.cal, p.model, &p.scenario);
     let contact = model.unobservable.inner().contact();
-    let d = &contact.gate().nu_points;
-    let nu = d.len();
-    let a_idx = d.partition_point(|&z| z < 0.25 * contact.gate().quoin_height);
-    // a quarter-hour step: the lockage cycle is 8 h, an hourly step draws it as a zig-zag
-    const QUARTERS_PER_DAY: usize = 4 * 24;
-    let hours: Vec<f64> = (0..=7 * QUARTERS_PER_DAY).map(|q| q as f64 / 4.0).collect();
-    // The schedule repeats every day (8-h lockages, 24-h tailwater), so one day is computed
-    // and the week repeats it. Computed hour by hour, day k's levels differ from day 0's by
-    // the round-off of `sin` and `cos` at larger arguments (2.7e-12 in at most over this
-    // week), which moves no pixel: the SVGs of a paper-size run were byte-identical both
-    // ways. The hours are independent: one predictor, rows in parallel (collected in order).
-    let predictor = cal.predictor(model)?;
-    let day: Vec<[f64; 6]> = hours[..QUARTERS_PER_DAY]
-        .par_iter()
-        .map(|&h| -> Result<[f64; 6]> {
-            let phase = (h / 8.0 * std::f64::consts::TAU).sin();
-            let x = [
-                560.0 + 150.0 * phase.max(-0.9),
-                60.0 + 20.0 * (h / 24.0 * std::f64::consts::TAU).cos(),
-            ];
-            let t = truth::true_forces(scenario, contact, x)?;
-            let b = prior_mean_response(model, &x)?;
-            let (a, _) = predictor.response_moments(&x)?;
-            let (i, j) = (a_idx, nu + a_idx);
-            Ok([t[i], b[i], a[i], t[j], b[j], a[j]])
-        })
-        .collect::<Vec<_>>() // every row first: an error is then the first in their order
-        .into_iter()
-        .collect::<Result<_>>()?;
-    let rows: Vec<[f64; 6]> = (0..hours.len())
-        .map(|q| day[q % QUARTERS_PER_DAY])
-        .collect();
-    let cols: Vec<Vec<f64>> = (0..6)
-        .map(|c| rows.iter().map(|r| r[c]).collect())
-        .collect();
+    let h = bamudi_gate::paper::figures::force_history(model, cal, scenario, contact)?;
+    let col = |k: usize, c: usize| -> Vec<f64> { h.rows.iter().map(|r| r[k][c]).collect() };
     let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
-    for (c, name, fig) in [(0usize, "normal", 21), (3, "tangential", 22)] {
+    for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         line_plot(
             &dir.join(format!("history_{name}.svg")),
             &format!(
-                "{}, {mode}: {name} force at location A (d_u = {:.0} in) over a week (Fig. {fig})",
-                res.name, d[a_idx]
+                "{}, {mode}: {name} force at location A (d_u = {:.0} in) over a week (Fig. 22)",
+                res.name, h.location.1
             ),
             "time (h)",
             "force (lbf/in)",
             &[
-                series("truth", TRUTH, &hours, &cols[c], false),
-                series("before", BEFORE, &hours, &cols[c + 1], true),
-                series("after BA-MUDI", AFTER, &hours, &cols[c + 2], false),
+                series("truth", TRUTH, &h.hours, &col(0, c), false),
+                series("before", BEFORE, &h.hours, &col(1, c), true),
+                series("without discrepancy (ρ, θ fitted)", NO_DELTA, &h.hours, &col(2, c), true),
+                series("after BA-MUDI", AFTER, &h.hours, &col(3, c), false),
+                series("95 % band", BAND, &h.hours, &col(4, c), true),
+                series("", BAND, &h.hours, &col(5, c), true),
             ],
         )?;
     }

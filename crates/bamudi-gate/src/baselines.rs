@@ -21,8 +21,10 @@
 //! * **(f) θ spread**: the truth with `θ*` replaced by the calibration's `θ` posterior: what
 //!   `θ`'s posterior spread alone costs (near the gap's edge the force changes by thousands of
 //!   lbf/in per inch of gap, so this dominates every force RMSE over the quoin);
-//! * **(g) seen oracle at the posterior**: (e) with the calibration's `θ` posterior instead of
-//!   `θ*`, the floor for a method with this `θ` posterior;
+//! * **(g) seen oracle at the posterior**: the model at the calibration's `θ` posterior
+//!   (`ρ*` known) corrected by exactly what the gauges see of the remaining force error: what
+//!   the posterior mean of a calibration with this `θ` posterior would be if its correction
+//!   were perfect, the floor for such a method;
 //!
 //! and the reconstructed discrepancy `δ̂` against the true one in the truth's split
 //! ([`DeltaScore`]).
@@ -60,8 +62,10 @@ pub struct Baselines {
     /// remove (zero in reports saved before it was measured).
     #[serde(default)]
     pub theta_spread: NormalTangential,
-    /// (g) (e) at the calibration's `θ` posterior, `ρ* E[g(θ) | y] + δ_seen`: the floor for a
-    /// method with this `θ` posterior.
+    /// (g) the seen-subspace correction at the calibration's `θ` posterior:
+    /// `m + seen(F* − m)` with `m = ρ* E[g(θ) | y]`, what a calibration that knew `ρ*` and
+    /// corrected exactly what the gauges see would give with this `θ` posterior (the floor for
+    /// a method with this `θ` posterior).
     #[serde(default)]
     pub oracle_seen_posterior: NormalTangential,
 }
@@ -73,6 +77,12 @@ pub struct DeltaScore {
     pub true_rms: NormalTangential,
     /// RMSE of `δ̂` against it.
     pub rmse: NormalTangential,
+    /// RMSE against it of the discrepancy (g) reconstructs, `seen(F* − m)`: what `θ`'s
+    /// posterior spread leaves of `δ̂`'s error for a method that corrects exactly what the
+    /// gauges see (the part of `F* − m` that is not `δ` is the model's change across the
+    /// posterior, which the correction absorbs).
+    #[serde(default)]
+    pub floor: NormalTangential,
 }
 
 /// The part of a discrepancy the gauges see, on the calibration's basis supported above a
@@ -123,7 +133,7 @@ fn oracle_error(e: &str) -> GateAppError {
 /// Sums of squares per component for named series, turned into RMSEs.
 #[derive(Debug, Clone, Default)]
 pub struct ErrorTally {
-    ss: [[f64; 2]; 8],
+    ss: [[f64; 2]; 9],
     n: [usize; 2],
 }
 
@@ -146,6 +156,8 @@ pub enum Series {
     ThetaSpread = 6,
     /// (g).
     OracleSeenPosterior = 7,
+    /// (g)'s discrepancy against the true one.
+    DeltaFloor = 8,
 }
 
 impl ErrorTally {
@@ -184,6 +196,7 @@ impl ErrorTally {
         DeltaScore {
             true_rms: self.rmse(Series::OracleSplit),
             rmse: self.rmse(Series::DeltaError),
+            floor: self.rmse(Series::DeltaFloor),
         }
     }
 }
@@ -217,6 +230,13 @@ impl ErrorTally {
             .map(|(t, m)| t - m)
             .collect();
         let delta_seen = seen.seen(&delta);
+        let residual: Vec<f64> = f
+            .truth
+            .iter()
+            .zip(f.model_part_posterior)
+            .map(|(t, m)| t - m)
+            .collect();
+        let correction = seen.seen(&residual);
         for p in 0..f.truth.len() {
             let t = f.truth[p];
             self.add(
@@ -234,8 +254,9 @@ impl ErrorTally {
                     ),
                     (
                         Series::OracleSeenPosterior,
-                        f.model_part_posterior[p] + delta_seen[p] - t,
+                        f.model_part_posterior[p] + correction[p] - t,
                     ),
+                    (Series::DeltaFloor, correction[p] - delta[p]),
                 ],
             );
         }

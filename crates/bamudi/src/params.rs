@@ -348,9 +348,8 @@ pub struct MarginalPrior {
     pub kernel: CoefficientKernel,
     /// Prior variance of each coefficient function's unknown level, relative to the process
     /// variance (dimensionless, ≥ 0): `α_k(x) = √s a_k(x) (z_k(x) + β_k)`, `β_k ~ N(0, c)`.
-    /// `0` is a zero-mean prior; `1e4` is vague, near an unknown flat-prior level (ordinary
-    /// kriging); the default, [`DEFAULT_LEVEL_VARIANCE`] = `1e3`, is the measured trade-off
-    /// between honest `θ` intervals and the force's accuracy; see [`crate::module3::marginal`].
+    /// `0` (the default, [`DEFAULT_LEVEL_VARIANCE`]) is a zero-mean prior; `1e4` is vague,
+    /// near an unknown flat-prior level (ordinary kriging); see [`crate::module3::marginal`].
     ///
     /// ```
     /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = 1e4").unwrap();
@@ -390,21 +389,16 @@ pub struct FixedHyper {
 /// eigenvalues would swamp the process's in double precision.
 pub const MAX_LEVEL_VARIANCE: f64 = 1e8;
 
-/// The default [`MarginalPrior::level_variance`]: each coefficient function's level is unknown
-/// with a prior variance of 1e3 times the process variance. A zero-mean prior (`0`) leaves
-/// scenario 1's `θ` posterior biased above θ* (quick study: 50 % coverage 0.38, SBC p < 0.001;
-/// paper size 0.33): the paper's normal δ grows with the load, a persistent level that prior
-/// finds improbable, so `ρ` and `θ` move instead. With `1e3` the quick study's levels and SBC
-/// tests pass in both scenarios (SBC p 0.35 and 0.35), and so do the paper-size study's in
-/// scenario 1 (100 replicates of 500 experiments: 95 % 0.95, 50 % 0.50, SBC p 0.063; scenario 2
-/// not yet run at that size, `docs/results/coverage.md`), with the force's posterior mean 1.7-2.7
-/// times less accurate than at `0`, and at paper size the normal force is still corrected
-/// 15-27x (README, "Why each coefficient function has an unknown level"). A vague level
-/// (`1e4`) costs the force more (paper size: 3.3x). What `1e3` does not fix, measured: on clean
-/// data at θ* = 90 in the posterior mean sits 0.10 in high (8 misses in 110 clean seeds of the
-/// adequacy matrix), and it hides a gauge's 5 % gain error that `0` flags 2 times in 3
-/// (`docs/results/adequacy.md`).
-pub const DEFAULT_LEVEL_VARIANCE: f64 = 1e3;
+/// The default [`MarginalPrior::level_variance`]: `0`, a zero-mean prior, with the default
+/// [`CoefficientScales::Isotropic`] scales. A level per coefficient function (`1e3`) made `θ`
+/// confounded with the discrepancy's load-proportional part: on the tuning study (quick size,
+/// 20 replicates per scenario, seed 2021, the paper's δ) the `θ` posterior sd doubled (0.17 →
+/// 0.36 in) and, as the contact force at the gap's edge follows `θ`, the corrected normal force
+/// was 2.5x less accurate (RMSE 110 → 276 lbf/in, scenario 1); with `0` the `θ` intervals held
+/// their levels on that study as well (`docs/results/validation.md` has the design table and
+/// the validation on other seeds). Under the per-component scales used before, `0` had failed
+/// the coverage study and `1e3` was the default.
+pub const DEFAULT_LEVEL_VARIANCE: f64 = 0.0;
 
 /// The correlation family of the marginal mode's coefficient functions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -423,7 +417,7 @@ pub enum CoefficientKernel {
 impl Default for MarginalPrior {
     fn default() -> Self {
         Self {
-            scales: CoefficientScales::SharedPerComponent,
+            scales: CoefficientScales::Isotropic,
             mask_outside_support: true,
             kernel: CoefficientKernel::Matern52,
             level_variance: DEFAULT_LEVEL_VARIANCE,
@@ -441,8 +435,10 @@ pub enum CoefficientScales {
     PerCoefficient,
     /// Every coefficient of a response component the largest range of that component at `x`:
     /// no polynomial order is presumed smaller than another (the discrepancy's shape is
-    /// unknown), while the size still follows the nominal response.
-    #[default]
+    /// unknown), while the size still follows the nominal response. The default before the
+    /// isotropic scales: the tangential coefficients' ranges follow the tangential response's
+    /// size, so a normal-force discrepancy was partly explained by tangential coefficients
+    /// (reconstructed δ 2-11x worse than leaving it out).
     SharedPerComponent,
     /// One force-unit scale for every coefficient of every component: the root mean square
     /// `r(x)` of the nominal response `g_u(x, θ̄)` over all its points. The supported basis is
@@ -451,7 +447,8 @@ pub enum CoefficientScales {
     /// shares one correlation function, so the prior of the correction `L α(x)` is the same in
     /// every direction of the basis's span: no direction of the response is cheaper than
     /// another, and the posterior mean corrects only what the observations see (the posterior
-    /// mean of `α(x)` lies in the row space of `B` at every input).
+    /// mean of `α(x)` lies in the row space of `B` at every input). The default.
+    #[default]
     Isotropic,
 }
 

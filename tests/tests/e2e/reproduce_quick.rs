@@ -5,14 +5,21 @@
 //!
 //! What is asserted is what the method delivers on our gate, in a form the prior would fail:
 //! the default (marginal) mode must learn θ (posterior sd under 1/20 of the prior's) and land
-//! within four of its own sd of θ*, learn ρ (its interval of ±4 sd holds 0.8 and excludes the
-//! prior mean), and correct the force field (normal-force RMSE after at most 1/5 of before).
-//! The reconstructed discrepancy is printed, not asserted (only `ρ g + δ` is identified). The paper's
-//! Module 3 is only required to explain the strains: its ρ* is not identified by Eq. 30 (it
-//! runs to the search bound, because 12 coefficients absorb `(0.8 − ρ) g` through 7 gauges),
-//! so its θ interval misses θ* and the force field is not corrected (see
-//! docs/results/reproduce-paper.md). Whether intervals hold θ* at their nominal rate is the
-//! coverage study's question (one data set cannot answer it).
+//! within four of its own sd of θ*, estimate the identified ρ⊥ within four of its sd of the
+//! truth's, fit the strains better than the best calibration without a discrepancy (ρ and θ
+//! fitted), and give a corrected force within 10 % of the floor for its θ posterior (the model
+//! at that posterior with ρ* known, corrected by everything the gauges see of the remaining
+//! error). The reconstructed discrepancy is printed, not asserted. The paper's Module 3 is only
+//! required to explain the strains better than the discrepancy's own strain effect: its ρ* is
+//! not identified by Eq. 30, so its θ interval misses θ* (see docs/results/reproduce-paper.md).
+//!
+//! Against the weaker baseline it used to be compared with (ρ = 1 and the discrepancy model's
+//! σ_ε), the paper's Module 3 pulled θ towards the truth and its strains beat the baseline's
+//! fivefold; the best fit without a discrepancy (ρ fitted, σ_ε profiled) is closer to θ* than
+//! the paper's Module 3 in both scenarios (90.22 and 150.08 against 92.27 and 152.48 in when
+//! this was written), so those two assertions were replaced, not loosened: they compared
+//! against a baseline no user would choose. Whether intervals hold θ* at their nominal rate is
+//! the coverage study's question (one data set cannot answer it).
 
 use bamudi::observe::Silent;
 use bamudi_gate::paper::{ReproduceOptions, reproduce};
@@ -44,8 +51,8 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
         );
     }
     for s in &report.scenarios {
-        // Strains at 20 new conditions: the calibrated prediction error must be smaller than
-        // the strain effect of the true discrepancy itself (RMS of A δ), i.e. modelling δ must
+        // Strains at 20 new conditions: the paper's Module 3 must predict them better than the
+        // strain effect of the true discrepancy itself (RMS of A δ), i.e. modelling δ must
         // remove more error than it adds.
         assert!(
             s.strain_rmse.with_discrepancy < s.discrepancy_strain_rms,
@@ -54,17 +61,7 @@ fn quick_reproduction_explains_the_strains_and_moves_theta_towards_the_truth() {
             s.strain_rmse.with_discrepancy,
             s.discrepancy_strain_rms
         );
-        // ... and be far better than the calibration that ignores the discrepancy (Fig. 19-20).
-        assert!(s.strain_rmse.with_discrepancy < 0.2 * s.strain_rmse.without_discrepancy);
-        // Modelling the discrepancy must pull θ towards the truth (Fig. 16).
-        let (t, t0) = (&s.theta_posterior, &s.theta_posterior_no_discrepancy);
-        assert!(
-            (t.mean - s.theta_true).abs() < (t0.mean - s.theta_true).abs(),
-            "{}: with δ {} is not closer to θ* than without {}",
-            s.name,
-            t.mean,
-            t0.mean
-        );
+        let t = &s.theta_posterior;
         // Issue criterion for the paper size is 3 in; with a quarter of the experiments and
         // the ρ bias above, 6 in (a quarter of the prior width) is the quick-size bound.
         assert!(
@@ -144,7 +141,7 @@ fn check_marginal(s: &bamudi_gate::paper::ScenarioResult) {
     let t = &m.theta_posterior;
     let d = &m.discrepancy;
     eprintln!(
-        "{} marginal: rho {:.3} ± {:.3}, theta {:.2} ± {:.2} [{:.2}, {:.2}]; normal RMSE {:.1} -> {:.1}; \
+        "{} marginal: rho (split) {:.3} ± {:.3}, theta {:.2} ± {:.2} [{:.2}, {:.2}]; normal RMSE {:.1} -> {:.1}; \
          δ̂ RMSE {:.1} (true δ RMS {:.1}), band {:.2}/{:.2}",
         s.name,
         m.rho_star,
@@ -175,16 +172,34 @@ fn check_marginal(s: &bamudi_gate::paper::ScenarioResult) {
         t.sd,
         s.theta_true
     );
-    // ρ: truth 0.8; the ρ prior is uniform on the sampling rule's range, whose mean is not 0.8.
-    let rho_sd = m.rho_sd.expect("the marginal mode reports ρ's sd");
+    // ρ⊥, the data's own scale of g, against the truth's at the experiments. Its sd is the
+    // gauges' noise and θ's spread (1e-4 here), so 4 sd is tight; the split's ρ, which the data
+    // cannot tell from a discrepancy along g, is no longer asserted against 0.8.
+    let [rho, rho_sd] = m.rho_projection.expect("the marginal mode reports ρ⊥");
+    let rho_true = s.rho_projection_true.expect("the truth's ρ⊥");
     assert!(
-        (m.rho_star - 0.8).abs() < 4.0 * rho_sd,
-        "{}: ρ {} ± {}",
+        (rho - rho_true).abs() < 4.0 * rho_sd,
+        "{}: ρ⊥ {rho} ± {rho_sd} vs the truth's {rho_true}",
+        s.name
+    );
+    // The strains: better than the best calibration without a discrepancy.
+    assert!(
+        m.strain_rmse.with_discrepancy < m.strain_rmse.without_discrepancy,
+        "{}: strain RMSE {} with δ vs {} without",
         s.name,
-        m.rho_star,
-        rho_sd
+        m.strain_rmse.with_discrepancy,
+        m.strain_rmse.without_discrepancy
+    );
+    // The force: within 10 % of the floor for this θ posterior (measured 0.98-1.02 when
+    // written: the correction's own error is small beside θ's spread at the gap's edge), and
+    // corrected at least fivefold against the prior-mean model.
+    let b = m.baselines.expect("the reproduction scores the baselines");
+    assert!(
+        b.calibrated.normal <= 1.1 * b.oracle_seen_posterior.normal,
+        "{}: normal force RMSE {} vs the floor {}",
+        s.name,
+        b.calibrated.normal,
+        b.oracle_seen_posterior.normal
     );
     assert!(m.force_rmse.normal_after <= 0.2 * m.force_rmse.normal_before);
-    // δ̂ itself is reported, not asserted: the paper's δ is nearly proportional to g, so only
-    // ρ g + δ is identified and δ̂ moves with ρ's posterior (see the module docs).
 }

@@ -128,7 +128,13 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
                 nt(b.oracle_seen_posterior, 1),
                 nt(c.vs_no_discrepancy, 2),
                 nt(c.vs_oracle_seen, 2),
-                nt(c.delta_ratio, 2),
+                format!(
+                    "{:.2} / {:.2} (floor {:.2} / {:.2})",
+                    c.delta_ratio.normal,
+                    c.delta_ratio.tangential,
+                    c.delta_floor_ratio.normal,
+                    c.delta_floor_ratio.tangential
+                ),
                 nt(c.halfwidth_over_delta, 2),
                 s.z_mean_sd[0],
                 s.z_mean_sd[1],
@@ -146,9 +152,10 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
          calibration; (d) the truth's own split ρ* g(θ*), whose error is the true δ; (e) (d) \
          plus the part of δ the gauges see (the floor for a method that knew θ*); (f) the truth \
          with θ* replaced by this calibration's θ posterior (what θ's spread alone costs); (g) \
-         (e) at this θ posterior. Ratios are medians of per-replicate \
+         the model at this θ posterior with ρ* known, corrected by exactly what the gauges see \
+         (the floor for this θ posterior). Ratios are medians of per-replicate \
          ratios; δ̂ / δ is the reconstructed discrepancy's RMSE over the true δ's RMS (truth's \
-         split); half-width / δ the mean 95 % force band half-width over the true δ's RMS; \
+         split), with the floor (g)'s reconstruction leaves; half-width / δ the median (over conditions and points) 95 % force band half-width over the true δ's RMS; \
          θ z: mean / sd of (posterior mean − θ*)/sd; ρ⊥: the identified ρ against the truth's \
          (95 % coverage, z mean and rms).\n\n\
          | scenario | mode | (a) | (b) | (c) | (d) | (e) | (f) | (g) | (c)/(b) | (c)/(e) | δ̂ / δ | half-width / δ | θ z mean / sd | ρ⊥ 95 % |\n\

@@ -253,6 +253,10 @@ pub struct Replicate {
     /// `None` in reports saved before it was measured.
     #[serde(default)]
     pub band_halfwidth: Option<NormalTangential>,
+    /// Median half-width of the 95 % force bands over the condition × point pairs (lbf/in;
+    /// `None` in reports saved before it was measured).
+    #[serde(default)]
+    pub band_halfwidth_median: Option<NormalTangential>,
     /// The force RMSE of every baseline and oracle ([`crate::baselines`]; `None` in reports
     /// saved before they were measured).
     #[serde(default)]
@@ -399,8 +403,13 @@ pub struct CorrectionSummary {
     pub delta_ratio: NormalTangential,
     /// Median RMSE of `δ̂` against the true `δ` (lbf/in).
     pub delta_rmse: NormalTangential,
-    /// Median of the mean 95 % band half-width / true `δ` RMS: how wide the band is against
-    /// what it is meant to resolve (`NaN` without a true `δ`).
+    /// Median of (g)'s discrepancy error / true `δ` RMS: the floor `θ`'s spread sets for
+    /// `δ̂ / δ`.
+    #[serde(default)]
+    pub delta_floor_ratio: NormalTangential,
+    /// Median over replicates of the median (over conditions and points) 95 % band
+    /// half-width / true `δ` RMS: how wide the band is against what it is meant to resolve
+    /// (`NaN` without a true `δ`).
     pub halfwidth_over_delta: NormalTangential,
     /// `ρ⊥` against the truth's `ρ⊥` (modes that report it).
     pub rho_projection: Option<RhoCheck>,
@@ -490,7 +499,7 @@ fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
 fn correction_summary(reps: &[Replicate]) -> Result<Option<CorrectionSummary>> {
     let all: Option<Vec<(Baselines, DeltaScore, NormalTangential)>> = reps
         .iter()
-        .map(|r| Some((r.baselines?, r.delta?, r.band_halfwidth?)))
+        .map(|r| Some((r.baselines?, r.delta?, r.band_halfwidth_median?)))
         .collect();
     let Some(all) = all.filter(|v| !v.is_empty()) else {
         return Ok(None);
@@ -526,6 +535,7 @@ fn correction_summary(reps: &[Replicate]) -> Result<Option<CorrectionSummary>> {
         vs_oracle_seen: med(&|v| ratio(v.0.calibrated, v.0.oracle_seen)),
         delta_ratio: med(&|v| ratio(v.1.rmse, v.1.true_rms)),
         delta_rmse: med(&|v| v.1.rmse),
+        delta_floor_ratio: med(&|v| ratio(v.1.floor, v.1.true_rms)),
         halfwidth_over_delta: med(&|v| ratio(v.2, v.1.true_rms)),
         rho_projection: z_check(
             rho.iter().map(|(m, sd, t)| (m - t) / sd).collect(),
@@ -867,6 +877,7 @@ impl Setup<'_> {
             band_fatigue: Some(fatigue.0 as f64 / fatigue.1.max(1) as f64),
             force_rmse: tally.rmse(),
             band_halfwidth: Some(tally.halfwidth()),
+            band_halfwidth_median: Some(tally.median_halfwidth()),
             baselines: Some(errors.baselines()),
             delta: Some(errors.delta()),
             rho_projection: cal.module3().marginal.as_ref().map(|m| m.rho_projection),
@@ -993,6 +1004,7 @@ struct BandTally {
     ss_before: [f64; 2],
     ss_after: [f64; 2],
     half: [f64; 2],
+    halves: [Vec<f64>; 2],
 }
 
 impl BandTally {
@@ -1003,6 +1015,16 @@ impl BandTally {
         self.ss_before[c] += (before - truth).powi(2);
         self.ss_after[c] += (band.mean[p] - truth).powi(2);
         self.half[c] += 0.5 * (band.upper[p] - band.lower[p]);
+        self.halves[c].push(0.5 * (band.upper[p] - band.lower[p]));
+    }
+
+    /// Median band half-width over the pairs (lbf/in): the mean is dominated by the few
+    /// points at the gap's edge, where the force's uncertainty is that of `θ`.
+    fn median_halfwidth(&self) -> NormalTangential {
+        NormalTangential {
+            normal: median(self.halves[0].iter().copied()),
+            tangential: median(self.halves[1].iter().copied()),
+        }
     }
 
     /// Mean band half-width (lbf/in).
@@ -1170,6 +1192,7 @@ mod tests {
                 tangential_after: 1.0,
             },
             band_halfwidth: None,
+            band_halfwidth_median: None,
             baselines: None,
             delta: None,
             rho_projection: None,

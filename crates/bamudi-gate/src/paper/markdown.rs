@@ -2,7 +2,7 @@
 
 use super::fatigue::FatigueSummary;
 use super::{
-    ConditionalResult, DiscrepancyScore, ForceRmse, ReproduceReport, SENSITIVITY_EXPERIMENTS,
+    ConditionalResult, DiscrepancyScore, FigureScores, ForceRmse, ReproduceReport, SENSITIVITY_EXPERIMENTS,
     SENSITIVITY_GRID, ScenarioResult, StrainRmse,
 };
 use crate::baselines::{Baselines, NormalTangential};
@@ -38,6 +38,16 @@ the quoin; (c) against (g) measures the discrepancy's correction alone. ρ of th
 not identified by the data (a δ along g is indistinguishable from ρ); ρ⊥ is: the ρ that leaves \
 the discrepancy's strains orthogonal to the model's, estimated with the gauges' noise as its only \
 error. (crates/bamudi-gate/src/baselines.rs)\n\n";
+
+/// Printed above the figures table.
+pub(super) const FIGURES_NOTE: &str = "\n### Fig. 15 and Fig. 22 with numbers\n\n\
+Fig. 15: the reconstructed discrepancy δ̂ with its 95 % band against the true δ along the quoin \
+at the paper's condition (`docs/results/scenario-*/discrepancy_*.svg`). Fig. 22: the force at \
+location A over a week of lockages (an 8-h filling and emptying cycle on a daily tailwater \
+swing; `history_*.svg`). Location A is the first quoin point at or above a quarter of the quoin \
+height: the paper's Fig. 10 marks A low on the quoin, above the gap, and a quarter of the \
+height lies above every gap of either prior, so A is always in contact and its force is not \
+the gap's edge, whose error is θ's (`bamudi_gate::paper::figures`).\n\n";
 
 /// Printed above the fatigue table.
 pub(super) const FATIGUE_NOTE: &str = "\n## Prediction level: quoin-block fatigue (Eq. 8; not in the paper's results)\n\n\
@@ -90,6 +100,7 @@ impl ReproduceReport {
             s.push_str(HEADLINE_NOTE);
             self.headline_table(&mut s);
             self.baselines_table(&mut s);
+            self.figures_table(&mut s);
             s.push_str("\n## As published: the paper's Module 3 (Eq. 50)\n\n");
         }
         self.main_table(&mut s);
@@ -411,6 +422,58 @@ impl ReproduceReport {
         ));
     }
 
+    /// Fig. 15 and Fig. 22 with numbers (the headline calibration).
+    fn figures_table(&self, s: &mut String) {
+        if !self.scenarios.iter().any(|r| r.figures.is_some()) {
+            return;
+        }
+        s.push_str(FIGURES_NOTE);
+        s.push_str("| | S1 normal | S1 tangential | S2 normal | S2 tangential |\n|---|---|---|---|---|\n");
+        type Pick<'a> = &'a dyn Fn(&FigureScores, bool) -> String;
+        let rows: [(&str, Pick<'_>); 11] = [
+            ("Fig. 15 condition h_up, h_down (in)", &|f, _| {
+                format!("{}, {}", f.fig15.condition[0], f.fig15.condition[1])
+            }),
+            ("Fig. 15: true δ RMS along the quoin (lbf/in)", &|f, n| {
+                format!("{:.1}", c15(f, n).true_rms)
+            }),
+            ("Fig. 15: δ̂ RMSE (lbf/in)", &|f, n| format!("{:.1}", c15(f, n).rmse)),
+            ("Fig. 15: true δ inside the 95 % band", &|f, n| {
+                format!("{:.2}", c15(f, n).band_coverage)
+            }),
+            ("Fig. 15: median band half-width (lbf/in)", &|f, n| {
+                format!("{:.1}", c15(f, n).median_halfwidth)
+            }),
+            ("Fig. 22: location A, height (in)", &|f, _| {
+                format!("{:.1}", f.fig22.location_in)
+            }),
+            ("Fig. 22: true force RMS over the week (lbf/in)", &|f, n| {
+                format!("{:.0}", c22(f, n).true_rms)
+            }),
+            ("Fig. 22: RMSE before (prior mean, ρ = 1)", &|f, n| {
+                format!("{:.1}", c22(f, n).rmse_before)
+            }),
+            ("Fig. 22: RMSE of the best fit without δ", &|f, n| {
+                format!("{:.1}", c22(f, n).rmse_no_discrepancy)
+            }),
+            ("Fig. 22: RMSE after (default mode)", &|f, n| {
+                format!("{:.1}", c22(f, n).rmse_after)
+            }),
+            ("Fig. 22: truth inside the 95 % band / median half-width", &|f, n| {
+                let c = c22(f, n);
+                format!("{:.2} / {:.1}", c.band_coverage, c.median_halfwidth)
+            }),
+        ];
+        for (name, f) in rows {
+            let (a, b) = self.cells(&|r| {
+                r.figures.as_ref().map_or("– | –".into(), |fs| {
+                    format!("{} | {}", f(fs, true), f(fs, false))
+                })
+            });
+            s.push_str(&format!("| {name} | {a} | {b} |\n"));
+        }
+    }
+
     /// Every quantity that calibration made worse, per mode and scenario.
     fn worse_list(&self, s: &mut String) {
         let mut lines = Vec::new();
@@ -564,6 +627,14 @@ fn sensitivity_table(s: &mut String, r: &ScenarioResult) {
         ));
     }
     s.push_str(SENSITIVITY_NOTE);
+}
+
+fn c15(f: &FigureScores, normal: bool) -> super::figures::CurveScore {
+    if normal { f.fig15.normal } else { f.fig15.tangential }
+}
+
+fn c22(f: &FigureScores, normal: bool) -> super::figures::HistoryScore {
+    if normal { f.fig22.normal } else { f.fig22.tangential }
 }
 
 fn th(t: &ThetaSummary) -> String {

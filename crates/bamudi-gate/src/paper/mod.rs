@@ -20,6 +20,7 @@
 //! other rules and reports how ρ* and the θ posterior move.
 
 pub mod fatigue;
+pub mod figures;
 mod markdown;
 pub(crate) mod score;
 pub use score::DiscrepancyScore;
@@ -305,6 +306,19 @@ pub struct ScenarioResult {
     /// truth, from the headline calibration (absent in reports written before it existed).
     #[serde(default)]
     pub fatigue: Option<fatigue::FatigueSummary>,
+    /// Fig. 15 and Fig. 22 as numbers, from the headline calibration (absent in reports
+    /// written before they were measured).
+    #[serde(default)]
+    pub figures: Option<FigureScores>,
+}
+
+/// The paper's Fig. 15 and Fig. 22 as numbers ([`figures`]).
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct FigureScores {
+    /// `δ̂` with its band against the true `δ` along the quoin at the paper's condition.
+    pub fig15: figures::Fig15,
+    /// The force at location A over a week: truth, before, without a discrepancy, after.
+    pub fig22: figures::Fig22,
 }
 
 /// Module-1 facts about the gate.
@@ -585,6 +599,14 @@ pub fn run_scenario(
     clock.lap("quoin-block fatigue");
     let discrepancy_strain_rms = s.discrepancy_strain_rms();
     clock.lap("true discrepancy's strain");
+    let shown = headline.as_ref().unwrap_or(&cal);
+    let curve = figures::discrepancy_curve(&s.model, shown, &s.scenario, contact, number)?;
+    let history = figures::force_history(&s.model, shown, &s.scenario, contact)?;
+    let figure_scores = FigureScores {
+        fig15: curve.score(figures::condition(number)),
+        fig22: history.score(),
+    };
+    clock.lap("Fig. 15 and Fig. 22");
     let (m3, tm) = (cal.module3(), cal.timings());
     let result = ScenarioResult {
         name: format!("scenario {number}"),
@@ -611,6 +633,7 @@ pub fn run_scenario(
         conditional,
         marginal,
         fatigue: Some(fatigue::FatigueSummary::of(&profile, x_fatigue)),
+        figures: Some(figure_scores),
     };
     Ok((result, headline.unwrap_or(cal), s.model))
 }

@@ -15,6 +15,8 @@ pub const BEFORE: RGBColor = RGBColor(200, 60, 40);
 pub const AFTER: RGBColor = RGBColor(30, 90, 200);
 /// A 95 % band around [`AFTER`].
 pub const BAND: RGBColor = RGBColor(120, 160, 230);
+/// The strongest baseline: the best calibration without a discrepancy.
+pub const NO_DELTA: RGBColor = RGBColor(110, 110, 110);
 /// The prior.
 pub const PRIOR: RGBColor = RGBColor(150, 150, 150);
 /// An alarm (a detected change) and its onset interval.

@@ -6,15 +6,25 @@
 //!
 //! For a linear observable model the observations of experiment `i` are
 //! `y_i = ρ A g(x_i, θ) + b(x_i, θ) + B α(x_i) + ε_i`, `ε_i ~ N(0, σ² I)`. Each coefficient
-//! function gets a Gaussian-process prior `α_k(x) = √s a_k(x) (z_k(x) + β_k)`: `z_k` has
-//! Module 2's length scales times one common factor, with Module 2's kernel or a Matérn 5/2
-//! ([`MarginalPrior::kernel`]); `β_k ~ N(0, c)` is the function's unknown level
-//! ([`MarginalPrior::level_variance`]; `c = 1e3` by default); `a_k(x)` is
-//! the standard deviation `h(x)/√3` of the sampling rule's uniform coefficient range `±h(x)` at `x` (the prior the estimator of Eq. 29 learns
-//! under), by default the largest `h` of the coefficient's response component
-//! ([`CoefficientScales`]); and `s` is one amplitude. Integrating `α` out gives
-//! `y ~ N(ρ a(θ) + b(θ), V)` with `V = s Σ_k K_k ⊗ b_k b_kᵀ + σ² I`: the structure of Eq. 51
-//! with prior covariances in place of posterior ones.
+//! function gets a Gaussian-process prior `α_k(x) = √s a_k(x) (z_k(x) + β_k)`: `z_k` a
+//! stationary process of unit variance ([`MarginalPrior::kernel`], Matérn 5/2 by default),
+//! `β_k ~ N(0, c)` an optional unknown level ([`MarginalPrior::level_variance`]; `0` by
+//! default), `a_k(x)` a scale ([`CoefficientScales`]) and `s` one amplitude. Integrating `α`
+//! out gives `y ~ N(ρ a(θ) + b(θ), V)` with `V = s Σ_k K_k ⊗ b_k b_kᵀ + σ² I`: the structure
+//! of Eq. 51 with prior covariances in place of posterior ones.
+//!
+//! The default prior is **isotropic in the response's units**
+//! ([`CoefficientScales::Isotropic`]): the basis supported above the gap is orthonormalised
+//! in the response's own metric ([`orthonormalised`]: a unit coefficient is a correction of
+//! unit root mean square), every coefficient shares one scale `a(x)` (the nominal response's
+//! root mean square at `x`: the discrepancy grows with the load) and one correlation
+//! function (length scales half the range the experiments span, times a fitted factor). Then
+//! no direction of the correction is cheaper than another, and the posterior mean of `α(x)`
+//! lies in the row space of `B` at every input: the correction is the least force that
+//! explains what the gauges see, and the directions they cannot see keep their prior (mean
+//! zero, the prior's band). With the earlier per-component scales (each component's range
+//! from the nominal response's size) a normal-force discrepancy was partly explained by
+//! tangential coefficients, and the reconstructed discrepancy was 2-11x worse than none.
 //!
 //! Where the model says the response is zero by construction at `θ`
 //! ([`UnobservableModel::discrepancy_support`]; for the gate, the gap below `θ`), the basis
@@ -23,49 +33,23 @@
 //! the grid (one `B`, one factorisation); the posterior's width is far below the support's
 //! resolution (a quoin cell), and the coverage study checks the result.
 //!
-//! Why these defaults (measured with `cargo xtask coverage --quick`, 40 replicates per
-//! scenario; `docs/results/coverage-shapes.md`): with per-coefficient scales the nominal response's
-//! shape decides which polynomial orders the discrepancy may use, and the θ posterior of
-//! scenario 1 sat about 1.5 sd above θ* (95 % coverage 0.45-0.60); the squared exponential's
-//! very smooth sample paths left it 1.2-1.5 sd high (0.80); Matérn 5/2 with shared scales is
-//! the least over-confident on every discrepancy shape tried. The residual bias is the
-//! confounding of a discrepancy nearly proportional to `g` with `ρ` and `θ` (Kennedy-O'Hagan's
-//! identifiability problem): with 7 gauges and 12 coefficients, `θ` is identified only
-//! through the coefficients' prior.
+//! # What the data identify
 //!
-//! Where scenario 1's bias comes from, and the unknown level: over the coverage study's
-//! replicates the `θ` error follows `ρ`'s (`ρ` 0.8045 on average against 0.8). A zero-mean
-//! stationary prior says a coefficient function wanders about zero, so a discrepancy with a
-//! persistent level (a force error that grows with the load, as the paper's normal δ does) is
-//! improbable under it, and the calibration moves `ρ` and `θ` to explain the level instead.
-//! With `level_variance = 1e4` (a vague level per coefficient function) the quick study passes
-//! every level and the SBC test in both scenarios (scenario 1: 50 % coverage 0.50, SBC p 0.79,
-//! median sd 0.173 in instead of 0.070) and stays calibrated with no discrepancy; but the
-//! force's posterior mean is 4x less accurate there (RMSE after / before 0.10 instead of
-//! 0.025) and at paper size scenario 1's normal force is corrected 3.3x (32x with the zero-mean
-//! prior, 15x with the default 1e3): the
-//! levels of the directions the gauges see only weakly are poorly determined. With
-//! `level_variance = 1e3` both scenarios still pass every level and the SBC test (SBC p 0.35
-//! and 0.35, median sd 0.16-0.17 in) at a force RMSE after / before of 0.042 and 0.068, and at
-//! paper size the normal force is corrected 15x and 27x
-//! (`docs/results/coverage-quick.md`, `docs/results/reproduce-paper.md`).
-//! `1e3` is the default ([`crate::params::DEFAULT_LEVEL_VARIANCE`]): the zero-mean prior's θ
-//! intervals fail the coverage study in scenario 1 (quick: 50 % coverage 0.38, SBC p < 0.001),
-//! and intervals are claims before the force is a prediction. What it leaves open: against the
-//! adequacy matrix it still misses θ* = 90 in on clean data (a 0.10 in bias there, 8 of 110
-//! seeds) and hides a gauge's 5 % gain error (`docs/results/adequacy.md`). The remaining
-//! scenario-1 shift (posterior mean about a third of a sd above `θ*`) comes through `ρ`: with
-//! `ρ`'s prior narrowed to the truth (`cargo xtask coverage --quick --rho-range 0.799,0.801`) it
-//! goes, and `ρ`'s own 95 % interval, which holds the simulator's 0.8 in only about half the
-//! replicates at the default, then holds it; with no discrepancy it holds it at the default
-//! too (`docs/results/coverage-quick*.md`). The paper's δ has a part along `g` that no data can
-//! tell from `ρ g`.
+//! `ρ` of the split `ρ g + δ` is not identified: a discrepancy along `g` is the same data as a
+//! different `ρ` (Kennedy-O'Hagan's confounding), and only the discrepancy's prior chooses
+//! between them. What the data fix is `ρ⊥` ([`MarginalFit::rho_projection`]), the `ρ` that
+//! leaves the discrepancy's strains orthogonal to the model's (the least-squares projection of
+//! Tuo & Wu; Plumlee's orthogonality in the observations' metric), and the corrected response
+//! `ρ g + L α` itself. Near the gap's edge that response changes by thousands of lbf/in per
+//! inch of `θ`, so `θ`'s posterior spread, not the discrepancy, sets the corrected force's
+//! error there (`bamudi_gate::baselines` measures both). The measured comparison of the priors
+//! tried is in `docs/results/validation.md`.
 //!
 //! # What is integrated, what is estimated
 //!
 //! * `α` (every coefficient direction, including those the gauges cannot see, and the
-//!   levels `β` unless `level_variance = 0`): analytically; each level is one more column of the
-//!   low-rank factor.
+//!   levels `β` when `level_variance > 0`): analytically; each level is one more column of
+//!   the low-rank factor.
 //! * `ρ`: analytically over its uniform prior (the sampling rule's `rho_range`; [`rho`]).
 //! * the declared tolerances of the system's build, when the model declares any
 //!   ([`mlmodel::MultiLevelModel::with_tolerances`]): analytically, each deviation `N(0, 1)`
@@ -73,7 +57,8 @@
 //!   posterior is reported ([`ToleranceEstimate`]).
 //! * `θ`: on the grid (or by MCMC) of [`super::grid`].
 //! * `σ_ε`, `s` and the length-scale factor: type-II maximum likelihood at `θ̂`, alternating
-//!   with `θ̂` itself ([`HYPER_ROUNDS`]); `σ_ε` is held when configured. Maximising the
+//!   with `θ̂` itself ([`HYPER_ROUNDS`]); `σ_ε` is held when configured, `s` and the factor
+//!   when [`MarginalPrior::fixed`] says so (simulation-based calibration). Maximising the
 //!   marginal likelihood accounts for the degrees of freedom the discrepancy uses, unlike a
 //!   residual RMS. With `N_s = N_e N_o` observations their posteriors are narrow (relative sd
 //!   of `σ` about `1/√(2 N_s)`); the coverage study measures what holding them costs.

@@ -1,0 +1,279 @@
+//! `cargo xtask validation`: the two-part validation protocol of the default calibration,
+//! fixed before it was run (`docs/results/validation.md`):
+//!
+//! 1. **Self-consistency (SBC)**: `θ`, `ρ` and the discrepancy drawn per replicate from the
+//!    calibration's stated prior; the calibration holds the generating hyper-parameters
+//!    (`sbc-held`) or estimates them as the product does (`sbc-estimated`). Ranked: `θ`, `ρ`,
+//!    the normal force at location A, the hot spot's damage.
+//! 2. **Robustness to a fixed, wrong discrepancy**: a panel of shapes (the paper's at 0.5, 1,
+//!    2 and 4 times its size, tapered, normal only, tangential only, none, and two shapes of
+//!    files none of the library's shapes resembles), `θ*` from the prior, fresh noise and
+//!    levels per replicate; the paper's shape and none also at the paper's size.
+//!
+//! Every part is one coverage study (`bamudi_gate::coverage`) written to
+//! `<out>/<part>.json` as it finishes (with the running log `<part>.json.partial.jsonl`
+//! meanwhile): a stopped run resumes by skipping the parts already written. `--render` (also
+//! run after the parts) writes `<out>/../validation.md` from whatever parts exist.
+
+use anyhow::{Context, Result, bail};
+use bamudi_gate::coverage::{
+    CorrectionSummary, CoverageOptions, CoverageReport, DiscrepancyShape, GeneratingHyper,
+    SbcOptions, ScenarioCoverage,
+};
+use std::path::{Path, PathBuf};
+
+/// The seeds of the validation, none used while choosing the prior (those were 2021, 7 and 11;
+/// `docs/results/validation.md`).
+pub const PANEL_SEED: u64 = 31_337;
+/// The seed of the SBC parts.
+pub const SBC_SEED: u64 = 4_242;
+/// The seed of the paper-size parts.
+pub const PAPER_SEED: u64 = 777;
+
+/// The generating hyper-parameters of SBC: the amplitude and noise the calibration fits on the
+/// paper's data at the quick size (medians over the tuning study's replicates: amplitude
+/// 6.1e-6, σ 1.00 µε; fitted length factors 3-29), with a length factor of 5 so the draws vary
+/// across the water levels, and no level (the default prior's).
+pub const SBC_HYPER: GeneratingHyper = GeneratingHyper {
+    amplitude: 6e-6,
+    length_scale_factor: 5.0,
+    level_variance: 0.0,
+    noise_sd: 1.0,
+};
+
+/// The command line's choices.
+#[derive(clap::Args)]
+pub struct ValidationArgs {
+    /// Parts to run, comma separated: `sbc-held`, `sbc-estimated`, `panel`, `paper-size`, or a
+    /// single part's name (`panel-paper`, ...). Default: none (only `--render`).
+    #[arg(long, value_delimiter = ',')]
+    parts: Vec<String>,
+    /// Replicates per scenario of the quick parts (SBC: 500, panel: 100 by default).
+    #[arg(long)]
+    replicates: Option<usize>,
+    /// Replicates per scenario of the paper-size parts.
+    #[arg(long, default_value_t = 30)]
+    paper_replicates: usize,
+    /// Worker threads (0: all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Where the parts' JSON go.
+    #[arg(long, default_value = "docs/results/validation")]
+    out: PathBuf,
+    /// Write the markdown from the parts that exist.
+    #[arg(long)]
+    render: bool,
+}
+
+/// One part of the protocol.
+struct Part {
+    name: String,
+    opts: CoverageOptions,
+    group: &'static str,
+}
+
+fn parts(a: &ValidationArgs) -> Vec<Part> {
+    let quick = |seed: u64, reps: usize| CoverageOptions {
+        seed,
+        n_replicates: reps,
+        threads: a.threads,
+        new_conditions: 4,
+        ..CoverageOptions::quick()
+    };
+    let mut out = Vec::new();
+    for hold in [true, false] {
+        let mut o = quick(SBC_SEED, a.replicates.unwrap_or(500));
+        o.sbc = Some(SbcOptions {
+            hyper: SBC_HYPER,
+            hold,
+        });
+        out.push(Part {
+            name: format!("sbc-{}", if hold { "held" } else { "estimated" }),
+            opts: o,
+            group: "sbc",
+        });
+    }
+    let shapes: [(&str, DiscrepancyShape, f64); 8] = [
+        ("paper", DiscrepancyShape::Paper, 1.0),
+        ("none", DiscrepancyShape::None, 1.0),
+        ("paper-x0.5", DiscrepancyShape::Paper, 0.5),
+        ("paper-x2", DiscrepancyShape::Paper, 2.0),
+        ("paper-x4", DiscrepancyShape::Paper, 4.0),
+        ("tapered", DiscrepancyShape::Tapered, 1.0),
+        ("normal-only", DiscrepancyShape::PaperNormal, 1.0),
+        ("tangential-only", DiscrepancyShape::PaperTangential, 1.0),
+    ];
+    for (name, shape, scale) in shapes {
+        let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
+        (o.discrepancy, o.discrepancy_scale) = (shape, scale);
+        out.push(Part {
+            name: format!("panel-{name}"),
+            opts: o,
+            group: "panel",
+        });
+    }
+    for file in ["bulge.csv", "tilt.toml"] {
+        let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
+        o.discrepancy_file = Some(a.out.join("shapes").join(file));
+        out.push(Part {
+            name: format!("panel-file-{}", file.split('.').next().unwrap_or(file)),
+            opts: o,
+            group: "panel",
+        });
+    }
+    for (name, shape) in [("paper", DiscrepancyShape::Paper), ("none", DiscrepancyShape::None)] {
+        let o = CoverageOptions {
+            modes: vec![bamudi::CoefficientMode::Marginal],
+            seed: PAPER_SEED,
+            n_replicates: a.paper_replicates,
+            threads: a.threads,
+            discrepancy: shape,
+            ..CoverageOptions::paper_exact()
+        };
+        out.push(Part {
+            name: format!("paper-size-{name}"),
+            opts: o,
+            group: "paper-size",
+        });
+    }
+    out
+}
+
+/// Runs the requested parts (skipping those written) and renders the markdown.
+pub fn run(a: &ValidationArgs) -> Result<()> {
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let all = parts(a);
+    for want in &a.parts {
+        if !all.iter().any(|p| &p.name == want || p.group == want) {
+            bail!("--parts {want}: no such part or group");
+        }
+    }
+    for part in all
+        .iter()
+        .filter(|p| a.parts.iter().any(|w| w == &p.name || w == p.group))
+    {
+        let json = a.out.join(format!("{}.json", part.name));
+        if json.exists() {
+            eprintln!("{}: {} exists, skipped", part.name, json.display());
+            continue;
+        }
+        eprintln!("{}: running", part.name);
+        let report = crate::coverage::study(&part.opts, Some(&json))?;
+        bamudi::data::write_atomic(&json, report.to_json()?.as_bytes())?;
+        let _ = std::fs::remove_file(crate::coverage::log_path(&json));
+    }
+    let md = render(&a.out, &all)?;
+    let path = a
+        .out
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join("validation.md");
+    bamudi::data::write_atomic(&path, md.as_bytes())?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+fn read(path: &Path) -> Result<Option<CoverageReport>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(Some(
+        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?,
+    ))
+}
+
+/// The level cell: rate and whether it lies in its acceptance region.
+fn level(s: &ScenarioCoverage, nominal: f64) -> String {
+    s.theta_levels
+        .iter()
+        .find(|l| (l.level - nominal).abs() < 1e-9)
+        .map_or("–".into(), |l| {
+            let ok = (l.acceptance.0..=l.acceptance.1).contains(&l.hits);
+            format!("{:.2}{}", l.rate, if ok { "" } else { " **miss**" })
+        })
+}
+
+fn nt(v: bamudi_gate::baselines::NormalTangential, p: usize) -> String {
+    format!("{:.*} / {:.*}", p, v.normal, p, v.tangential)
+}
+
+fn render(out: &Path, all: &[Part]) -> Result<String> {
+    let mut md = String::from(include_str!("validation_head.md"));
+    md.push_str("\n## Part 1: self-consistency (SBC)\n\n");
+    md.push_str(
+        "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd |\n|---|---|---|---|---|---|---|\n",
+    );
+    for part in all.iter().filter(|p| p.group == "sbc") {
+        let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
+            md.push_str(&format!("| {} | not run | | | | | |\n", part.name));
+            continue;
+        };
+        for s in &r.scenarios {
+            for q in s.ranked.iter().flatten() {
+                md.push_str(&format!(
+                    "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} |\n",
+                    part.name,
+                    s.name,
+                    q.n,
+                    level(s, 0.5),
+                    level(s, 0.9),
+                    level(s, 0.95),
+                    q.quantity,
+                    q.uniformity_p,
+                    q.z_mean_sd
+                        .map_or("–".into(), |[m, sd]| format!("{m:+.2} / {sd:.2}")),
+                ));
+            }
+        }
+    }
+    for (group, title) in [
+        ("panel", "Part 2: a fixed, wrong discrepancy (quick size)"),
+        ("paper-size", "Part 2 at the paper's size (500 experiments, 12-in mesh)"),
+    ] {
+        md.push_str(&format!("\n## {title}\n\n"));
+        md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
+        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        for part in all.iter().filter(|p| p.group == group) {
+            let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
+                md.push_str(&format!("| {} | not run | | | | | | | | | | | |\n", part.name));
+                continue;
+            };
+            for s in &r.scenarios {
+                let c: Option<&CorrectionSummary> = s.correction.as_ref();
+                let cell = |f: &dyn Fn(&CorrectionSummary) -> String| c.map_or("–".into(), f);
+                md.push_str(&format!(
+                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    part.name.trim_start_matches("panel-").trim_start_matches("paper-size-"),
+                    s.name,
+                    s.n_replicates,
+                    level(s, 0.5),
+                    level(s, 0.9),
+                    level(s, 0.95),
+                    s.z_mean_sd[0],
+                    s.z_mean_sd[1],
+                    cell(&|c| nt(c.baselines.no_discrepancy, 0)),
+                    cell(&|c| nt(c.baselines.calibrated, 0)),
+                    cell(&|c| nt(c.baselines.oracle_seen_posterior, 0)),
+                    cell(&|c| nt(c.vs_no_discrepancy, 2)),
+                    cell(&|c| format!(
+                        "{} [{}]",
+                        nt(c.delta_ratio, 2),
+                        nt(c.delta_floor_ratio, 2)
+                    )),
+                    nt(bamudi_gate::baselines::NormalTangential {
+                        normal: s.force_band_coverage_95.normal,
+                        tangential: s.force_band_coverage_95.tangential,
+                    }, 3),
+                    cell(&|c| nt(c.halfwidth_over_delta, 1)),
+                    cell(&|c| c
+                        .rho_projection
+                        .as_ref()
+                        .map_or("–".into(), |r| format!("{:.2}", r.coverage_95.rate))),
+                ));
+            }
+        }
+    }
+    md.push_str("\nEach part's full report: `cargo xtask coverage --render docs/results/validation/<part>.json`.\n");
+    Ok(md)
+}
