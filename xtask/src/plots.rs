@@ -268,7 +268,13 @@ fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
             &[
                 series("truth", TRUTH, &h.hours, &col(0, c), false),
                 series("before", BEFORE, &h.hours, &col(1, c), true),
-                series("without discrepancy (ρ, θ fitted)", NO_DELTA, &h.hours, &col(2, c), true),
+                series(
+                    "without discrepancy (ρ, θ fitted)",
+                    NO_DELTA,
+                    &h.hours,
+                    &col(2, c),
+                    true,
+                ),
                 series("after BA-MUDI", AFTER, &h.hours, &col(3, c), false),
                 series("95 % band", BAND, &h.hours, &col(4, c), true),
                 series("", BAND, &h.hours, &col(5, c), true),

@@ -121,7 +121,10 @@ fn parts(a: &ValidationArgs) -> Vec<Part> {
             group: "panel",
         });
     }
-    for (name, shape) in [("paper", DiscrepancyShape::Paper), ("none", DiscrepancyShape::None)] {
+    for (name, shape) in [
+        ("paper", DiscrepancyShape::Paper),
+        ("none", DiscrepancyShape::None),
+    ] {
         let o = CoverageOptions {
             modes: vec![bamudi::CoefficientMode::Marginal],
             seed: PAPER_SEED,
@@ -177,7 +180,8 @@ fn read(path: &Path) -> Result<Option<CoverageReport>> {
     if !path.exists() {
         return Ok(None);
     }
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     Ok(Some(
         serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?,
     ))
@@ -229,14 +233,20 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
     }
     for (group, title) in [
         ("panel", "Part 2: a fixed, wrong discrepancy (quick size)"),
-        ("paper-size", "Part 2 at the paper's size (500 experiments, 12-in mesh)"),
+        (
+            "paper-size",
+            "Part 2 at the paper's size (500 experiments, 12-in mesh)",
+        ),
     ] {
         md.push_str(&format!("\n## {title}\n\n"));
         md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
         md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for part in all.iter().filter(|p| p.group == group) {
             let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
-                md.push_str(&format!("| {} | not run | | | | | | | | | | | |\n", part.name));
+                md.push_str(&format!(
+                    "| {} | not run | | | | | | | | | | | |\n",
+                    part.name
+                ));
                 continue;
             };
             for s in &r.scenarios {

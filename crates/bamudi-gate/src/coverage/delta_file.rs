@@ -64,6 +64,9 @@ enum Load {
 /// Most grid values per axis, and most Legendre terms, accepted (a table of 1e6 rows reads in
 /// a second; more is a mistake, not a shape).
 const MAX_AXIS: usize = 1_000;
+
+/// The table's columns, in order.
+const COLUMNS: [&str; 5] = ["h_up", "h_down", "d_u", "normal", "tangential"];
 const MAX_TERMS: usize = 64;
 
 impl DeltaFile {
@@ -148,33 +151,13 @@ impl Table {
                     .ok_or_else(|| {
                         bad(
                             i + 1,
-                            format!("column `{}`: `{cell}` is not a finite number", WANT[c]),
+                            format!("column `{}`: `{cell}` is not a finite number", COLUMNS[c]),
                         )
                     })?;
             }
             rows.push(row);
         }
-        let axis = |c: usize| -> Vec<f64> {
-            let mut v: Vec<f64> = rows.iter().map(|r| r[c]).collect();
-            v.sort_by(f64::total_cmp);
-            v.dedup();
-            v
-        };
-        let axes = [axis(0), axis(1), axis(2)];
-        let (lo, hi) = WATER_LEVEL_RANGE;
-        for (c, (need_lo, need_hi)) in [(0, (lo, hi)), (1, (lo, hi)), (2, (0.0, height))] {
-            let a = &axes[c];
-            if a.len() < 2 || a.len() > MAX_AXIS || a[0] > need_lo || a[a.len() - 1] < need_hi {
-                return Err(GateAppError::Invalid(format!(
-                    "{name}: column `{}` must take 2 to {MAX_AXIS} values spanning [{need_lo}, {need_hi}] in, \
-                     got {} values in [{}, {}]",
-                    WANT[c],
-                    a.len(),
-                    a.first().copied().unwrap_or(f64::NAN),
-                    a.last().copied().unwrap_or(f64::NAN),
-                )));
-            }
-        }
+        let axes = Self::axes(&rows, name, height)?;
         let size = axes.iter().map(Vec::len).product::<usize>();
         if rows.len() != size {
             return Err(GateAppError::Invalid(format!(
@@ -198,6 +181,33 @@ impl Table {
             values[k] = [r[3], r[4]];
         }
         Ok(Self { axes, values })
+    }
+
+    /// The sorted distinct values of each level and height column, checked to span the water
+    /// levels and the quoin.
+    fn axes(rows: &[[f64; 5]], name: &str, height: f64) -> Result<[Vec<f64>; 3]> {
+        let axis = |c: usize| -> Vec<f64> {
+            let mut v: Vec<f64> = rows.iter().map(|r| r[c]).collect();
+            v.sort_by(f64::total_cmp);
+            v.dedup();
+            v
+        };
+        let axes = [axis(0), axis(1), axis(2)];
+        let (lo, hi) = WATER_LEVEL_RANGE;
+        for (c, (need_lo, need_hi)) in [(0, (lo, hi)), (1, (lo, hi)), (2, (0.0, height))] {
+            let a = &axes[c];
+            if a.len() < 2 || a.len() > MAX_AXIS || a[0] > need_lo || a[a.len() - 1] < need_hi {
+                return Err(GateAppError::Invalid(format!(
+                    "{name}: column `{}` must take 2 to {MAX_AXIS} values spanning [{need_lo}, {need_hi}] in, \
+                     got {} values in [{}, {}]",
+                    COLUMNS[c],
+                    a.len(),
+                    a.first().copied().unwrap_or(f64::NAN),
+                    a.last().copied().unwrap_or(f64::NAN),
+                )));
+            }
+        }
+        Ok(axes)
     }
 
     /// Multilinear interpolation at `p` (clamped to the grid).

@@ -2,8 +2,8 @@
 
 use super::fatigue::FatigueSummary;
 use super::{
-    ConditionalResult, DiscrepancyScore, FigureScores, ForceRmse, ReproduceReport, SENSITIVITY_EXPERIMENTS,
-    SENSITIVITY_GRID, ScenarioResult, StrainRmse,
+    ConditionalResult, DiscrepancyScore, FigureScores, ForceRmse, ReproduceReport,
+    SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, ScenarioResult, StrainRmse,
 };
 use crate::baselines::{Baselines, NormalTangential};
 use crate::error::{GateAppError, Result};
@@ -407,9 +407,13 @@ impl ReproduceReport {
         s.push_str(&ratio("(c) / (b)", &|b| b.no_discrepancy));
         s.push_str(&ratio("(c) / (e)", &|b| b.oracle_seen));
         s.push_str(&ratio("(c) / (g)", &|b| b.oracle_seen_posterior));
+        self.rho_projection_row(s);
+    }
+
+    /// `ρ⊥` of the headline against the truth's.
+    fn rho_projection_row(&self, s: &mut String) {
         let (a, b) = self.cells(&|r| {
-            let m = r.marginal.as_ref();
-            let p = m.and_then(|m| m.rho_projection);
+            let p = r.marginal.as_ref().and_then(|m| m.rho_projection);
             format!(
                 "{} | truth {}",
                 p.map_or("–".into(), |[mean, sd]| format!("{mean:.4} ± {sd:.4}")),
@@ -428,7 +432,9 @@ impl ReproduceReport {
             return;
         }
         s.push_str(FIGURES_NOTE);
-        s.push_str("| | S1 normal | S1 tangential | S2 normal | S2 tangential |\n|---|---|---|---|---|\n");
+        s.push_str(
+            "| | S1 normal | S1 tangential | S2 normal | S2 tangential |\n|---|---|---|---|---|\n",
+        );
         type Pick<'a> = &'a dyn Fn(&FigureScores, bool) -> String;
         let rows: [(&str, Pick<'_>); 11] = [
             ("Fig. 15 condition h_up, h_down (in)", &|f, _| {
@@ -437,7 +443,9 @@ impl ReproduceReport {
             ("Fig. 15: true δ RMS along the quoin (lbf/in)", &|f, n| {
                 format!("{:.1}", c15(f, n).true_rms)
             }),
-            ("Fig. 15: δ̂ RMSE (lbf/in)", &|f, n| format!("{:.1}", c15(f, n).rmse)),
+            ("Fig. 15: δ̂ RMSE (lbf/in)", &|f, n| {
+                format!("{:.1}", c15(f, n).rmse)
+            }),
             ("Fig. 15: true δ inside the 95 % band", &|f, n| {
                 format!("{:.2}", c15(f, n).band_coverage)
             }),
@@ -459,10 +467,13 @@ impl ReproduceReport {
             ("Fig. 22: RMSE after (default mode)", &|f, n| {
                 format!("{:.1}", c22(f, n).rmse_after)
             }),
-            ("Fig. 22: truth inside the 95 % band / median half-width", &|f, n| {
-                let c = c22(f, n);
-                format!("{:.2} / {:.1}", c.band_coverage, c.median_halfwidth)
-            }),
+            (
+                "Fig. 22: truth inside the 95 % band / median half-width",
+                &|f, n| {
+                    let c = c22(f, n);
+                    format!("{:.2} / {:.1}", c.band_coverage, c.median_halfwidth)
+                },
+            ),
         ];
         for (name, f) in rows {
             let (a, b) = self.cells(&|r| {
@@ -630,11 +641,19 @@ fn sensitivity_table(s: &mut String, r: &ScenarioResult) {
 }
 
 fn c15(f: &FigureScores, normal: bool) -> super::figures::CurveScore {
-    if normal { f.fig15.normal } else { f.fig15.tangential }
+    if normal {
+        f.fig15.normal
+    } else {
+        f.fig15.tangential
+    }
 }
 
 fn c22(f: &FigureScores, normal: bool) -> super::figures::HistoryScore {
-    if normal { f.fig22.normal } else { f.fig22.tangential }
+    if normal {
+        f.fig22.normal
+    } else {
+        f.fig22.tangential
+    }
 }
 
 fn th(t: &ThetaSummary) -> String {

@@ -598,14 +598,9 @@ pub fn run_scenario(
     )?;
     clock.lap("quoin-block fatigue");
     let discrepancy_strain_rms = s.discrepancy_strain_rms();
-    clock.lap("true discrepancy's strain");
-    let shown = headline.as_ref().unwrap_or(&cal);
-    let curve = figures::discrepancy_curve(&s.model, shown, &s.scenario, contact, number)?;
-    let history = figures::force_history(&s.model, shown, &s.scenario, contact)?;
-    let figure_scores = FigureScores {
-        fig15: curve.score(figures::condition(number)),
-        fig22: history.score(),
-    };
+    let rho_projection_true = s.projection_rho()?;
+    clock.lap("true discrepancy's strain and ρ⊥");
+    let figure_scores = figure_scores(&s, headline.as_ref().unwrap_or(&cal), number)?;
     clock.lap("Fig. 15 and Fig. 22");
     let (m3, tm) = (cal.module3(), cal.timings());
     let result = ScenarioResult {
@@ -621,7 +616,7 @@ pub fn run_scenario(
         sigma_eps: cal.sigma_eps(),
         discrepancy: scores.discrepancy.clone(),
         baselines: Some(scores.baselines),
-        rho_projection_true: Some(s.projection_rho()?),
+        rho_projection_true: Some(rho_projection_true),
         estimator_accuracy: accuracy,
         timings_s: ScenarioTimings {
             module2: tm.module2_s(),
@@ -636,6 +631,16 @@ pub fn run_scenario(
         figures: Some(figure_scores),
     };
     Ok((result, headline.unwrap_or(cal), s.model))
+}
+
+/// Fig. 15 and Fig. 22 as numbers for the calibration `shown`.
+fn figure_scores(s: &ScenarioRun<'_>, shown: &Calibration, number: u8) -> Result<FigureScores> {
+    let curve = figures::discrepancy_curve(&s.model, shown, &s.scenario, s.contact, number)?;
+    let history = figures::force_history(&s.model, shown, &s.scenario, s.contact)?;
+    Ok(FigureScores {
+        fig15: curve.score(figures::condition(number)),
+        fig22: history.score(),
+    })
 }
 
 /// Runs both scenarios, reporting progress to `observer`. `on_scenario` is called after each

@@ -169,36 +169,16 @@ pub(super) fn score(
     // the conditions in parallel (contact solves), the errors collected in their order
     let per_x = new_x
         .par_iter()
-        .map(|x| -> Result<_> {
-            let truth_f = truth::true_forces(scenario, contact, *x)?;
-            let model_part = truth::true_forces(&no_delta, contact, *x)?;
-            let before = prior_mean_response(model, x)?;
-            let (after, _) = predictor.response_moments(x)?;
-            let with = predictor.outputs(x)?.mean;
-            let without = predictor.no_discrepancy_outputs(x)?.mean;
-            let baseline = predictor.no_discrepancy_response(x)?.mean;
-            let delta_hat = predictor.discrepancy(x)?.mean;
-            let posterior_part = posterior_model_part(&predictor, scenario.rho, x)?;
-            Ok((
-                x,
-                truth_f,
-                model_part,
-                before,
-                after,
-                with,
-                without,
-                baseline,
-                delta_hat,
-                posterior_part,
-            ))
-        })
+        .map(|x| condition(model, &predictor, scenario, &no_delta, contact, x))
         .collect::<Vec<_>>() // every condition first: an error is then the first in their order
         .into_iter()
         .collect::<Result<Vec<_>>>()?;
     let (mut dn_b, mut dn_a, mut dt_b, mut dt_a) = (vec![], vec![], vec![], vec![]);
     let (mut ds_w, mut ds_wo) = (vec![], vec![]);
     let mut tally = ErrorTally::default();
-    for (x, truth_f, model_part, before, after, with, without, baseline, delta_hat, post) in per_x {
+    for c in per_x {
+        let (x, truth, before, after) = (c.x, &c.truth, &c.before, &c.after);
+        let truth_f = truth;
         for b in 0..2 * nu {
             let (eb, ea) = (before[b] - truth_f[b], after[b] - truth_f[b]);
             if b < nu {
@@ -211,21 +191,21 @@ pub(super) fn score(
         }
         tally.add_condition(
             &ConditionForces {
-                truth: &truth_f,
-                model_part: &model_part,
-                model_part_posterior: &post,
-                prior_mean: &before,
-                no_discrepancy: &baseline,
-                calibrated: &after,
-                delta_hat: &delta_hat,
+                truth,
+                model_part: &c.model_part,
+                model_part_posterior: &c.posterior_part,
+                prior_mean: before,
+                no_discrepancy: &c.baseline,
+                calibrated: after,
+                delta_hat: &c.delta_hat,
             },
             &seen,
             nu,
         );
-        let true_strain = contact.gate().strain(&truth_f, x[0], x[1]);
+        let true_strain = contact.gate().strain(truth_f, x[0], x[1]);
         for p in 0..true_strain.len() {
-            ds_w.push(with[p] - true_strain[p]);
-            ds_wo.push(without[p] - true_strain[p]);
+            ds_w.push(c.with[p] - true_strain[p]);
+            ds_wo.push(c.without[p] - true_strain[p]);
         }
     }
     Ok(Scores {
@@ -241,6 +221,43 @@ pub(super) fn score(
         },
         discrepancy: discrepancy_score(&predictor, scenario, contact, new_x)?,
         baselines: tally.baselines(),
+    })
+}
+
+/// What one new condition contributes to the scores.
+struct Condition {
+    x: [f64; 2],
+    truth: Vec<f64>,
+    model_part: Vec<f64>,
+    before: Vec<f64>,
+    after: Vec<f64>,
+    with: Vec<f64>,
+    without: Vec<f64>,
+    baseline: Vec<f64>,
+    delta_hat: Vec<f64>,
+    posterior_part: Vec<f64>,
+}
+
+/// The truth, every prediction and the baselines at `x`.
+fn condition(
+    model: &GateMultiLevel,
+    predictor: &bamudi::Predictor<'_, impl UnobservableModel, impl LinearObservableModel>,
+    scenario: &Scenario,
+    no_delta: &Scenario,
+    contact: &ContactModel,
+    x: &[f64; 2],
+) -> Result<Condition> {
+    Ok(Condition {
+        x: *x,
+        truth: truth::true_forces(scenario, contact, *x)?,
+        model_part: truth::true_forces(no_delta, contact, *x)?,
+        before: prior_mean_response(model, x)?,
+        after: predictor.response_moments(x)?.0,
+        with: predictor.outputs(x)?.mean,
+        without: predictor.no_discrepancy_outputs(x)?.mean,
+        baseline: predictor.no_discrepancy_response(x)?.mean,
+        delta_hat: predictor.discrepancy(x)?.mean,
+        posterior_part: posterior_model_part(predictor, scenario.rho, x)?,
     })
 }
 
