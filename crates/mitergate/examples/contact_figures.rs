@@ -2,7 +2,7 @@
 //! tangential quoin line loads along the quoin for gap lengths θ = 0, 90 and 150 in at two
 //! water-level pairs, and the true discrepancy of both paper scenarios (Eq. 53-54).
 //!
-//! `cargo run --release -p mitergate --example contact_figures -- docs`
+//! `cargo run --release -p mitergate --example contact_figures -- docs/images`
 use mitergate::data::truth::{self, Scenario};
 use mitergate::{ContactModel, GateConfig, build_contact};
 use plotters::prelude::*;
@@ -58,7 +58,11 @@ const COLORS: [RGBColor; 3] = [
 ];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "docs".into()));
+    let dir = PathBuf::from(
+        std::env::args()
+            .nth(1)
+            .unwrap_or_else(|| "docs/images".into()),
+    );
     std::fs::create_dir_all(&dir)?;
     let (contact, _) = build_contact(&GateConfig::default())?;
     for x in [[744.0, 24.0], [426.0, 120.0]] {

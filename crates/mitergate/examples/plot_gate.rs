@@ -3,7 +3,7 @@
 //! (skin grey, girders blue, diaphragms and end posts orange, bearing webs purple), gauges as
 //! red dots, quoin bearing nodes blue, miter bearing nodes green, pintle and gudgeon black.
 //!
-//! `cargo run --release -p mitergate --example plot_gate -- docs/mitergate_mesh.svg [element size]`
+//! `cargo run --release -p mitergate --example plot_gate -- docs/images/mitergate_mesh.svg [element size]`
 use mitergate::gate::Member;
 use mitergate::{GateConfig, GateModel};
 use plotters::prelude::*;

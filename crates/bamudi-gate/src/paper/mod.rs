@@ -256,7 +256,7 @@ pub struct ConditionalResult {
     pub rho_projection: Option<[f64; 2]>,
 }
 
-/// Everything reported for one scenario (the `--json` schema of the README).
+/// Everything reported for one scenario (the `--json` schema of docs/getting-started.md).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ScenarioResult {
     /// "scenario 1" / "scenario 2".
