@@ -128,6 +128,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "resultant for x = 5 kN/m: {:.4} kN [{:.4}, {:.4}]",
         prediction.mean[1], prediction.lower[1], prediction.upper[1]
     );
+    // `--json`: the same numbers at full precision (the Python package's test of the same
+    // model written as numpy callables compares with them)
+    if std::env::args().any(|a| a == "--json") {
+        let (lo, hi) = theta.ci95;
+        println!(
+            "{{\"theta\": [{:?}, {:?}, {lo:?}, {hi:?}], \"rho_star\": {:?}, \"sigma_eps\": {:?}, \"load_mean\": {:?}, \"load_band\": [{:?}, {:?}], \"resultant\": [{:?}, {:?}, {:?}]}}",
+            theta.mean,
+            theta.sd,
+            cal.rho_star(),
+            cal.sigma_eps(),
+            band.mean,
+            band.lower[10],
+            band.upper[10],
+            prediction.mean[1],
+            prediction.lower[1],
+            prediction.upper[1]
+        );
+    }
     Ok(())
 }
 
