@@ -737,11 +737,8 @@ impl Model {
                 return Err(invalid(format!("{what}: `{dup}` is named twice")));
             }
         }
-        if coordinates.len() < 2 {
-            return Err(invalid(format!(
-                "coordinates: need at least 2 response points, got {}",
-                coordinates.len()
-            )));
+        if coordinates.is_empty() {
+            return Err(invalid("coordinates: need at least 1 response point"));
         }
         if let Some(k) = coordinates.iter().position(|c| !c.is_finite()) {
             return Err(invalid(format!("coordinates[{k}] is {}", coordinates[k])));
@@ -820,7 +817,13 @@ impl Model {
             .iter()
             .copied()
             .fold(f64::NEG_INFINITY, f64::max);
-        let interval = interval.unwrap_or((lo, hi));
+        // one point (a scalar response, the single-level case): the polynomials' interval
+        // only scales the constant term, any interval around the point serves
+        let interval = interval.unwrap_or(if lo < hi {
+            (lo, hi)
+        } else {
+            (lo - 1.0, lo + 1.0)
+        });
         if !(interval.0.is_finite() && interval.1.is_finite() && interval.0 < interval.1) {
             return Err(invalid(format!(
                 "discrepancy interval: need finite lo < hi, got ({}, {})",

@@ -128,12 +128,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "resultant for x = 5 kN/m: {:.4} kN [{:.4}, {:.4}]",
         prediction.mean[1], prediction.lower[1], prediction.upper[1]
     );
-    // `--json`: the same numbers at full precision (the Python package's test of the same
-    // model written as numpy callables compares with them)
+    // `--json`: the same numbers at full precision and the calibration's seconds (the Python
+    // package's test and benchmark of the same model as numpy callables compare with them)
     if std::env::args().any(|a| a == "--json") {
         let (lo, hi) = theta.ci95;
+        let t = cal.timings();
+        let seconds = t.module2_s() + t.coefficients_s + t.module3_s + t.adequacy_s;
         println!(
-            "{{\"theta\": [{:?}, {:?}, {lo:?}, {hi:?}], \"rho_star\": {:?}, \"sigma_eps\": {:?}, \"load_mean\": {:?}, \"load_band\": [{:?}, {:?}], \"resultant\": [{:?}, {:?}, {:?}]}}",
+            "{{\"theta\": [{:?}, {:?}, {lo:?}, {hi:?}], \"rho_star\": {:?}, \"sigma_eps\": {:?}, \"load_mean\": {:?}, \"load_band\": [{:?}, {:?}], \"resultant\": [{:?}, {:?}, {:?}], \"calibration_s\": {seconds:?}}}",
             theta.mean,
             theta.sd,
             cal.rho_star(),
