@@ -330,3 +330,14 @@ def test_prediction_and_coverage_errors(cal):
            noise_sd=0.01, replicates=2)
     expect("noise_sd must be finite and > 0", bamudi.coverage, analytic.model, lambda x, t: np.zeros((12, 6)), x,
            noise_sd=0.0, replicates=2)
+
+
+def test_the_documented_example_runs_as_printed(tmp_path):
+    src = (REPO / "python" / "examples" / "own_model.py").read_text()
+    docs = (REPO / "docs" / "python.md").read_text()
+    assert "```python\n" + src + "```" in docs, "docs/python.md must show python/examples/own_model.py verbatim"
+    assert len(src.splitlines()) < 40
+    out = subprocess.run([sys.executable, str(REPO / "python" / "examples" / "own_model.py")], cwd=tmp_path,
+                         capture_output=True, text=True, check=True).stdout
+    assert "decay 1.654 1/m, 95 % [1.585, 1.725] (truth 1.6)" in out, out
+    assert (tmp_path / "own_model_calibration" / "model.json").is_file()
