@@ -341,3 +341,22 @@ def test_the_documented_example_runs_as_printed(tmp_path):
                          capture_output=True, text=True, check=True).stdout
     assert "decay 1.654 1/m, 95 % [1.585, 1.725] (truth 1.6)" in out, out
     assert (tmp_path / "own_model_calibration" / "model.json").is_file()
+
+
+def test_two_parameters_with_normal_priors_take_the_mcmc_path():
+    points = analytic.POINTS
+
+    def two(x, theta):  # the strip load plus an extra linear load of slope theta[1] (kN/m per m)
+        return x[:, :1] * np.exp(-theta[0] * points) + theta[1] * points
+
+    m = bamudi.Model(two, coordinates=points, inputs=["load_kn_per_m"], outputs=analytic.model.outputs,
+                     A=analytic.A, prior={"decay": bamudi.Normal(1.5, 0.5), "slope": bamudi.Normal(0.0, 0.2)})
+    x = np.linspace(1.0, 10.0, 40).reshape(-1, 1)
+    y = two(x, [1.6, 0.1]) @ analytic.A.T + 0.002 * np.random.default_rng(0).standard_normal((40, 6))
+    c = bamudi.calibrate(m, (x, y), {"estimator": {"kind": "exact_linear"},
+                                     "mcmc": {"chains": 2, "warmup": 300, "samples": 600}}, seed=3)
+    assert c.theta_ci95.shape == (2, 2) and c.parameters == ["decay", "slope"]
+    assert c.theta_ci95[0, 0] < 1.6 < c.theta_ci95[0, 1] and c.theta_ci95[1, 0] < 0.1 < c.theta_ci95[1, 1]
+    d = c.posterior_draws()
+    assert d["method"] == "mcmc" and d["theta"].shape == (2, 600, 2) and d["rho"].shape == (2, 600)
+    assert c.posterior_grid() is None
