@@ -28,8 +28,8 @@
 
 use crate::invalid;
 use mlmodel::{
-    DiscrepancyBasis, LinearObservableModel, ModelError, MultiLevelModel, NormalPrior,
-    ObservableModel, Prior, UniformPrior, UnobservableModel,
+    DiscrepancyBasis, IndependentPrior, LinearObservableModel, ModelError, MultiLevelModel,
+    NormalPrior, ObservableModel, Prior, PriorDimension, UniformPrior, UnobservableModel,
 };
 use nalgebra::DMatrix;
 use numpy::{AllowTypeChange, IntoPyArray, PyArrayLikeDyn, PyUntypedArrayMethods};
@@ -473,44 +473,39 @@ impl LinearObservableModel for PyObservable {
 /// A user's multi-level model as the engine consumes it.
 pub(crate) type UserModel = MultiLevelModel<PyResponse, PyObservable>;
 
-/// The prior of `θ`: independent uniforms or independent normals, one pair per dimension.
+/// The prior of `θ`: independent dimensions, each uniform or normal; all-uniform and
+/// all-normal priors are the engine's [`UniformPrior`] and [`NormalPrior`], a mix is
+/// [`IndependentPrior`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub(crate) enum PriorSpec {
-    /// `(lo, hi)` per dimension.
-    Uniform(Vec<(f64, f64)>),
-    /// `(mean, sd)` per dimension.
-    Normal(Vec<(f64, f64)>),
-}
+#[serde(transparent)]
+pub(crate) struct PriorSpec(Vec<PriorDimension>);
 
 impl PriorSpec {
     fn build(&self) -> PyResult<Box<dyn Prior>> {
-        Ok(match self {
-            Self::Uniform(b) => {
-                Box::new(UniformPrior::new(b.clone()).map_err(|e| invalid(format!("prior: {e}")))?)
-            }
-            Self::Normal(m) => {
-                Box::new(NormalPrior::new(m.clone()).map_err(|e| invalid(format!("prior: {e}")))?)
-            }
-        })
+        let pairs = |f: fn(&PriorDimension) -> Option<(f64, f64)>| -> Option<Vec<(f64, f64)>> {
+            self.0.iter().map(f).collect()
+        };
+        let uniform = pairs(|d| match *d {
+            PriorDimension::Uniform { lo, hi } => Some((lo, hi)),
+            PriorDimension::Normal { .. } => None,
+        });
+        let normal = pairs(|d| match *d {
+            PriorDimension::Normal { mean, sd } => Some((mean, sd)),
+            PriorDimension::Uniform { .. } => None,
+        });
+        let prior: mlmodel::Result<Box<dyn Prior>> = match (uniform, normal) {
+            (Some(b), _) => UniformPrior::new(b).map(|p| Box::new(p) as Box<dyn Prior>),
+            (_, Some(m)) => NormalPrior::new(m).map(|p| Box::new(p) as Box<dyn Prior>),
+            _ => IndependentPrior::new(self.0.clone()).map(|p| Box::new(p) as Box<dyn Prior>),
+        };
+        prior.map_err(|e| invalid(format!("prior: {e}")))
     }
 
-    /// `(lo, hi)` of dimension `j` for messages and warnings: the uniform's bounds, or the
-    /// normal's mean ± 4 sd.
-    pub(crate) fn bounds(&self, j: usize) -> (f64, f64) {
-        match self {
-            Self::Uniform(b) => b[j],
-            Self::Normal(m) => (m[j].0 - 4.0 * m[j].1, m[j].0 + 4.0 * m[j].1),
-        }
-    }
-
-    pub(crate) fn is_uniform(&self) -> bool {
-        matches!(self, Self::Uniform(_))
-    }
-
-    fn dim(&self) -> usize {
-        match self {
-            Self::Uniform(v) | Self::Normal(v) => v.len(),
+    /// The bounds of a uniform dimension `j` (`None` for a normal one, which has none).
+    pub(crate) fn uniform_bounds(&self, j: usize) -> Option<(f64, f64)> {
+        match self.0[j] {
+            PriorDimension::Uniform { lo, hi } => Some((lo, hi)),
+            PriorDimension::Normal { .. } => None,
         }
     }
 }
@@ -686,11 +681,12 @@ impl Model {
     /// `response(x, theta)`: the distributed response `g_u` at `coordinates` (`N_u` points)
     /// for `components` components; `a` (`N_o x components·N_u`, columns component blocked)
     /// maps it to the `outputs`; `offset(x, theta)` adds `b` (none: 0). The prior is
-    /// `prior_kind` (`uniform`: `(lo, hi)` pairs; `normal`: `(mean, sd)` pairs), one pair per
+    /// `prior_kinds[j]` (`uniform`: a `(lo, hi)` pair; `normal`: `(mean, sd)`) with
+    /// `prior_pairs[j]` for each dimension (`parameters[j]`), one pair per
     /// `parameters` entry; the discrepancy has `terms[c]` terms of `family` on `interval`
     /// (default: the coordinates' range) for component `c`.
     #[new]
-    #[pyo3(signature = (response, coordinates, inputs, outputs, a, prior_kind, prior_pairs,
+    #[pyo3(signature = (response, coordinates, inputs, outputs, a, prior_kinds, prior_pairs,
                         parameters, family_name="legendre", terms=vec![2], interval=None,
                         components=1, offset=None, vectorised=true))]
     #[allow(clippy::too_many_arguments)]
@@ -701,7 +697,7 @@ impl Model {
         inputs: Vec<String>,
         outputs: Vec<String>,
         a: numpy::PyReadonlyArray2<'_, f64>,
-        prior_kind: &str,
+        prior_kinds: Vec<String>,
         prior_pairs: Vec<(f64, f64)>,
         parameters: Vec<String>,
         family_name: &str,
@@ -759,46 +755,51 @@ impl Model {
             return Err(invalid(format!("A[{i}, {j}] is {v}")));
         }
         let matrix = DMatrix::from_fn(n_o, width, |i, j| a_arr[[i, j]]);
-        let prior = match prior_kind {
-            "uniform" => PriorSpec::Uniform(prior_pairs),
-            "normal" => PriorSpec::Normal(prior_pairs),
-            other => {
-                return Err(invalid(format!(
-                    "prior: unknown kind `{other}` (uniform, normal)"
-                )));
-            }
-        };
-        for j in 0..prior.dim() {
-            let (p, q) = match &prior {
-                PriorSpec::Uniform(b) | PriorSpec::Normal(b) => b[j],
-            };
-            let ok = match prior {
-                PriorSpec::Uniform(_) => p.is_finite() && q.is_finite() && p < q,
-                PriorSpec::Normal(_) => p.is_finite() && q.is_finite() && q > 0.0,
-            };
-            if !ok {
-                let need = match prior {
-                    PriorSpec::Uniform(_) => "Uniform(lo, hi) needs finite lo < hi",
-                    PriorSpec::Normal(_) => {
-                        "Normal(mean, sd) needs a finite mean and a finite sd > 0"
-                    }
-                };
-                return Err(invalid(format!(
-                    "prior[{j}] ({}): {need}, got ({p}, {q})",
-                    parameters.get(j).map_or("?", |s| s.as_str())
-                )));
-            }
+        if prior_kinds.len() != prior_pairs.len() {
+            return Err(invalid(format!(
+                "prior: {} kinds for {} pairs",
+                prior_kinds.len(),
+                prior_pairs.len()
+            )));
         }
-        if prior.dim() == 0 {
+        if prior_pairs.is_empty() {
             return Err(invalid(
                 "prior: at least one dimension of theta is required",
             ));
         }
-        if parameters.len() != prior.dim() {
+        let mut dims = Vec::with_capacity(prior_pairs.len());
+        for (j, (kind, &(p, q))) in prior_kinds.iter().zip(&prior_pairs).enumerate() {
+            let name = parameters.get(j).map_or("?", |s| s.as_str());
+            let (dim, ok, need) = match kind.as_str() {
+                "uniform" => (
+                    PriorDimension::Uniform { lo: p, hi: q },
+                    p.is_finite() && q.is_finite() && p < q,
+                    "Uniform(lo, hi) needs finite lo < hi",
+                ),
+                "normal" => (
+                    PriorDimension::Normal { mean: p, sd: q },
+                    p.is_finite() && q.is_finite() && q > 0.0,
+                    "Normal(mean, sd) needs a finite mean and a finite sd > 0",
+                ),
+                other => {
+                    return Err(invalid(format!(
+                        "prior[{j}] ({name}): unknown kind `{other}` (uniform, normal)"
+                    )));
+                }
+            };
+            if !ok {
+                return Err(invalid(format!(
+                    "prior[{j}] ({name}): {need}, got ({p}, {q})"
+                )));
+            }
+            dims.push(dim);
+        }
+        let prior = PriorSpec(dims);
+        if parameters.len() != prior.0.len() {
             return Err(invalid(format!(
                 "parameters: {} names for a prior of {} dimension(s)",
                 parameters.len(),
-                prior.dim()
+                prior.0.len()
             )));
         }
         if terms.len() != components {

@@ -92,11 +92,11 @@ fn posterior_warnings(cal: &bamudi::Calibration, desc: &ModelDescription) -> Vec
         return vec![];
     };
     let name = &desc.parameters[0];
-    let bounds = match desc.prior.is_uniform() {
-        true => desc.prior.bounds(0),
-        // a normal prior has no bound to press against: only the resolution is judged
-        false => (f64::NEG_INFINITY, f64::INFINITY),
-    };
+    // a normal prior has no bound to press against: only the resolution is judged
+    let bounds = desc
+        .prior
+        .uniform_bounds(0)
+        .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
     g.warnings(bounds)
         .iter()
         .map(|w| format!("prior of `{name}`: {w}"))

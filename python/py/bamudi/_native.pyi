@@ -92,7 +92,7 @@ class Model:
 
     def __init__(
         self, response: Callable[..., Any], coordinates: Sequence[float], inputs: Sequence[str],
-        outputs: Sequence[str], a: npt.NDArray[np.float64], prior_kind: str,
+        outputs: Sequence[str], a: npt.NDArray[np.float64], prior_kinds: Sequence[str],
         prior_pairs: Sequence[Tuple[float, float]], parameters: Sequence[str], family_name: str = "legendre",
         terms: Sequence[int] = ..., interval: Optional[Tuple[float, float]] = None, components: int = 1,
         offset: Optional[Callable[..., Any]] = None, vectorised: bool = True,

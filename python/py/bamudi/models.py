@@ -63,8 +63,8 @@ class Discrepancy:
     interval: Optional[Tuple[float, float]] = None
 
 
-def _prior(prior, parameters) -> Tuple[str, list, list]:
-    """``(kind, pairs, names)`` of a prior given as one distribution, a sequence of them, or a
+def _prior(prior, parameters) -> Tuple[list, list, list]:
+    """``(kinds, pairs, names)`` of a prior given as one distribution, a sequence of them, or a
     mapping name → distribution."""
     if isinstance(prior, Mapping):
         names = [str(k) for k in prior.keys()]
@@ -79,14 +79,9 @@ def _prior(prior, parameters) -> Tuple[str, list, list]:
     for j, d in enumerate(dists):
         if not isinstance(d, (Uniform, Normal)):
             raise TypeError(f"prior[{j}] must be bamudi.Uniform or bamudi.Normal, not {type(d).__name__}")
-    kinds = {type(d) for d in dists}
-    if len(kinds) > 1:
-        raise BamudiError(
-            "prior: mixing Uniform and Normal dimensions is not supported; give every dimension the same kind"
-        )
-    if isinstance(dists[0], Uniform):
-        return "uniform", [(float(d.lo), float(d.hi)) for d in dists], names
-    return "normal", [(float(d.mean), float(d.sd)) for d in dists], names
+    kinds = ["uniform" if isinstance(d, Uniform) else "normal" for d in dists]
+    pairs = [(float(d.lo), float(d.hi)) if isinstance(d, Uniform) else (float(d.mean), float(d.sd)) for d in dists]
+    return kinds, pairs, names
 
 
 class Model:
@@ -95,7 +90,8 @@ class Model:
     * ``response(x, theta)``: the unobservable distributed response ``g_u`` at ``coordinates``,
       ``components`` components (vectorised: all inputs ``x`` ``(n, d)`` at one ``theta``);
     * ``A`` and an optional ``offset(x, theta)``: the observable outputs ``y = A g_u + b``;
-    * ``prior``: ``Uniform``/``Normal`` per dimension of θ (one, a list, or a dict name → prior);
+    * ``prior``: ``Uniform``/``Normal`` per dimension of θ, kinds mixed freely (one, a list, or a
+      dict name → prior);
     * ``discrepancy``: the basis along the response (:class:`Discrepancy`);
     * ``inputs``/``outputs``: column names (put the units in them).
 
@@ -118,7 +114,7 @@ class Model:
         vectorised: bool = True,
         parameters: Optional[Sequence[str]] = None,
     ):
-        kind, pairs, names = _prior(prior, parameters)
+        kinds, pairs, names = _prior(prior, parameters)
         coords = np.asarray(coordinates, dtype=np.float64)
         if coords.ndim != 1:
             raise BamudiError(f"coordinates must be 1-D (points,), got shape {coords.shape}")
@@ -131,7 +127,7 @@ class Model:
             raise TypeError("inputs and outputs must be sequences of names, not a string")
         self._native = _native.Model(
             response, [float(c) for c in coords], [str(s) for s in inputs], [str(s) for s in outputs],
-            np.ascontiguousarray(a), kind, pairs, names, discrepancy.family, terms,
+            np.ascontiguousarray(a), kinds, pairs, names, discrepancy.family, terms,
             None if discrepancy.interval is None else tuple(map(float, discrepancy.interval)),
             int(components), offset, bool(vectorised),
         )
