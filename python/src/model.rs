@@ -44,12 +44,12 @@ use std::sync::{Arc, Mutex, OnceLock};
 const ROW_MEMO: usize = 50_000;
 
 /// Bytes of batch results a vectorised callable keeps per run (at least
-/// [`MIN_CACHED_THETAS`] `θ` values whatever their size).
+/// [`CACHED_THETAS_PER_THREAD`] `θ` values per worker thread whatever their size).
 const BATCH_CACHE_BYTES: usize = 256 << 20;
 
-/// Fewest `θ` values whose batches are kept: enough for every worker thread to be at its own
-/// `θ` without evicting another's batch before its rows are read.
-const MIN_CACHED_THETAS: usize = 8;
+/// Fewest `θ` values whose batches are kept, per worker thread: enough for every thread to be
+/// at its own `θ` without evicting another's batch before its rows are read.
+const CACHED_THETAS_PER_THREAD: usize = 4;
 
 /// The first failure of a run's callbacks, kept to be raised when the engine returns.
 pub(crate) struct Failure {
@@ -344,7 +344,8 @@ impl RunCallback {
         let known = known.filter(|_| cb.vectorised).map(Known::new);
         let rows = known.as_ref().map_or(1, |k| k.index.len().max(1));
         let per_theta = rows * cb.width * 8;
-        let capacity = (BATCH_CACHE_BYTES / per_theta.max(1)).max(MIN_CACHED_THETAS);
+        let floor = CACHED_THETAS_PER_THREAD * rayon::current_num_threads();
+        let capacity = (BATCH_CACHE_BYTES / per_theta.max(1)).max(floor);
         Self {
             cb,
             state,
