@@ -14,8 +14,10 @@
 mod calibration;
 mod closeloop;
 mod gate;
+mod model;
 mod progress;
 mod simulate;
+mod usercal;
 
 use pyo3::prelude::*;
 
@@ -57,6 +59,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate::experiments_csv, m)?)?;
     m.add_function(wrap_pyfunction!(calibration::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(closeloop::close_loop, m)?)?;
+    m.add_class::<model::Model>()?;
+    m.add_class::<usercal::ModelCalibration>()?;
+    m.add_function(wrap_pyfunction!(usercal::calibrate_model, m)?)?;
+    m.add_function(wrap_pyfunction!(usercal::coverage, m)?)?;
     m.add_function(wrap_pyfunction!(read_input_text, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

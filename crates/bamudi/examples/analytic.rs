@@ -128,6 +128,26 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "resultant for x = 5 kN/m: {:.4} kN [{:.4}, {:.4}]",
         prediction.mean[1], prediction.lower[1], prediction.upper[1]
     );
+    // `--json`: the same numbers at full precision and the calibration's seconds (the Python
+    // package's test and benchmark of the same model as numpy callables compare with them)
+    if std::env::args().any(|a| a == "--json") {
+        let (lo, hi) = theta.ci95;
+        let t = cal.timings();
+        let seconds = t.module2_s() + t.coefficients_s + t.module3_s + t.adequacy_s;
+        println!(
+            "{{\"theta\": [{:?}, {:?}, {lo:?}, {hi:?}], \"rho_star\": {:?}, \"sigma_eps\": {:?}, \"load_mean\": {:?}, \"load_band\": [{:?}, {:?}], \"resultant\": [{:?}, {:?}, {:?}], \"calibration_s\": {seconds:?}}}",
+            theta.mean,
+            theta.sd,
+            cal.rho_star(),
+            cal.sigma_eps(),
+            band.mean,
+            band.lower[10],
+            band.upper[10],
+            prediction.mean[1],
+            prediction.lower[1],
+            prediction.upper[1]
+        );
+    }
     Ok(())
 }
 

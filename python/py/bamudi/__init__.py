@@ -28,15 +28,31 @@ import numpy as np
 
 from . import _native
 from ._native import BamudiError, Gate
+from .models import (
+    Discrepancy,
+    Model,
+    ModelCalibration,
+    Normal,
+    Uniform,
+    calibrate_model,
+    coverage,
+)
 
 __all__ = [
     "BamudiError",
     "Calibration",
+    "Discrepancy",
     "Experiments",
     "FieldRecord",
     "Gate",
+    "Model",
+    "ModelCalibration",
+    "Normal",
+    "Uniform",
     "calibrate",
+    "calibrate_model",
     "close_loop",
+    "coverage",
     "simulate_experiments",
     "simulate_field",
 ]
@@ -279,21 +295,27 @@ def _table(data, columns) -> Tuple[list, np.ndarray]:
 
 
 def calibrate(
-    gate: Gate,
+    gate: Union[Gate, Model],
     data,
-    config,
+    config=None,
     columns: Optional[Sequence[str]] = None,
     seed: Optional[int] = None,
     progress: Optional[Progress] = None,
     label: str = "data",
-) -> Calibration:
-    """BA-MUDI Modules 2-3 on ``gate`` from experiments ``data`` (:class:`Experiments`, a
+):
+    """BA-MUDI Modules 2-3. With a :class:`Model` of your own: :func:`calibrate_model`
+    (``data``: ``(x, y)`` arrays or a DataFrame; ``config``: the engine's keys, optional),
+    returning a :class:`ModelCalibration`. With a gate: on ``gate`` from experiments ``data`` (:class:`Experiments`, a
     pandas DataFrame, a dict of columns, or a 2-D array with ``columns``: ``h_up``, ``h_down``
     in inches and one column per gauge in microstrain). ``config`` is a dict, TOML text or the
     path of a TOML file with the keys of ``bamudi calibrate --config`` (``gap_prior``,
     ``discrepancy_terms``, ``calibration``); ``seed`` replaces its seed; ``label`` names the
     data in messages (an error at row ``i`` says ``line i + 2``, as in a CSV file with its
     header on line 1)."""
+    if isinstance(gate, Model):
+        return calibrate_model(gate, data, config, columns=columns, seed=seed, progress=progress)
+    if config is None:
+        raise TypeError("calibrate(gate, data, config): a gate's calibration needs its config (gap_prior, ...)")
     names, arr = _table(data, columns)
     native = _native.calibrate(
         gate, names, arr, seed=seed, progress=progress, data_label=label, **_config_args(config)
