@@ -17,10 +17,15 @@
 //!   [--profile-paper] [--out PATH]`: criterion benchmarks and the Python peers in one run, as
 //!   ratios in `docs/benchmarks.md` (and a profile of the quick reproduction with `--profile`,
 //!   of the paper-size one with `--profile-paper`).
+//! * `closeloop-panel [--kinds LIST] [--magnitudes LIST] [--onsets LIST] [--seeds N]
+//!   [--clean N] [--mesh IN] [--step-minutes M] [--draws N] [--out PATH] [--json PATH]`: the
+//!   close loop on records with undeclared effects and on clean records; writes
+//!   `docs/results/closeloop-panel.md` and `.json`.
 
 mod adequacy;
 mod bench;
 mod calculix;
+mod closeloop_panel;
 mod coverage;
 mod plots;
 mod validation;
@@ -54,6 +59,9 @@ enum Task {
     Adequacy(adequacy::AdequacyArgs),
     /// Benchmarks and the Python peers in one run, written as ratios to docs/benchmarks.md.
     Bench(bench::BenchArgs),
+    /// The close loop on records with effects nobody declared (sensor, structural,
+    /// operational, environmental), and on clean records; writes a markdown table and JSON.
+    CloseloopPanel(closeloop_panel::PanelArgs),
     /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
     CalculixCheck {
         /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
@@ -109,6 +117,7 @@ fn main() -> Result<()> {
         Task::Validation(args) => validation::run(&args),
         Task::Adequacy(args) => adequacy::run(&args),
         Task::Bench(args) => bench::run(&args),
+        Task::CloseloopPanel(args) => closeloop_panel::run(&args),
         Task::CalculixCheck {
             element_size,
             dir,

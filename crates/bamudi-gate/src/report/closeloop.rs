@@ -61,6 +61,7 @@ pub fn markdown(r: &CloseLoopReport) -> String {
     }
     s.push('\n');
     rmse_table(&mut s, r);
+    sensor_section(&mut s, r);
     alarms_section(&mut s, r);
     track_section(&mut s, r);
     effects_section(&mut s, r);
@@ -100,6 +101,92 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
         t(&r.theta_after),
         r.theta_after_basis
     );
+}
+
+/// The sensor findings: what was corrected or set aside, from when, with the fitted size, and
+/// the gap with and without the corrections; then the structure-or-sensor tests.
+fn sensor_section(s: &mut String, r: &CloseLoopReport) {
+    let Some(sr) = &r.sensor else {
+        return;
+    };
+    if let Some(sd) = r.theta_after_effect_sd {
+        let _ = writeln!(
+            s,
+            "The gap after includes the uncertainty of the accepted effects' and corrections' parameters: {sd:.3} in of sd added (propagated by re-calibration over draws of them).\n"
+        );
+    }
+    if sr.findings.is_empty() && sr.attribution_tests.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "## Sensor findings\n");
+    if !sr.findings.is_empty() {
+        let _ = writeln!(
+            s,
+            "| gauge(s) | kind | action | fitted size (± sd) | span (days) | found by | evidence |\n|---|---|---|---|---|---|---|"
+        );
+        for f in &sr.findings {
+            let size = match (f.size, f.size_sd) {
+                (Some(v), Some(sd)) => format!("{v:+.4} ± {sd:.4} {}", f.unit),
+                (Some(v), None) => format!("{v:+.4} {}", f.unit),
+                _ => "–".into(),
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {size} | {:.2} – {:.2} | {} | {} |",
+                f.gauges.join(" <-> "),
+                f.kind.name(),
+                match f.action {
+                    bamudi::closeloop::SensorAction::Corrected => "corrected",
+                    bamudi::closeloop::SensorAction::SetAside => "set aside",
+                },
+                f.from_day,
+                f.to_day,
+                f.source,
+                f.evidence
+            );
+        }
+        let t = |x: &Option<bamudi::closeloop::ThetaSummary>| {
+            x.map_or("–".into(), |x| {
+                format!(
+                    "{:.2} ± {:.2} (95 %: {:.2} – {:.2})",
+                    x.mean, x.sd, x.ci95.0, x.ci95.1
+                )
+            })
+        };
+        let _ = writeln!(
+            s,
+            "\n| gap θ (in) | value |\n|---|---|\n| without the sensor corrections | {} |\n| with them | {} |\n\n{} cells set aside (left out of every error above).{}\n",
+            t(&sr.theta_without_corrections),
+            t(&sr.theta_with_corrections),
+            sr.set_aside_cells,
+            if sr.fitted_on_test_rows {
+                " A correction was fitted on rows of the test window: for its gauge and span the error after is not out of sample."
+            } else {
+                ""
+            }
+        );
+    }
+    if !sr.attribution_tests.is_empty() {
+        let _ = writeln!(
+            s,
+            "Structure or sensor (residual sum of squares over the noise variance from the change on; the sensor side pays the penalty for choosing among its hypotheses):\n\n| change | from day | no change | parameter change | best sensor hypothesis | its score + penalty | verdict |\n|---|---|---|---|---|---|---|"
+        );
+        for t in &sr.attribution_tests {
+            let _ = writeln!(
+                s,
+                "| {} | {:.2} | {:.0} | {:.0} | {} | {:.0} + {:.1} | {} |",
+                t.subject,
+                t.from_day,
+                t.none,
+                t.structure,
+                t.sensor_hypothesis,
+                t.sensor,
+                t.penalty,
+                t.verdict
+            );
+        }
+        s.push('\n');
+    }
 }
 
 /// Every alarm in one table (the gauges' changes of level and the gap's change alarm), then

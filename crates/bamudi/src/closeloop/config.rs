@@ -130,6 +130,9 @@ pub struct CloseLoopConfig {
     pub event_scan: super::EventScanConfig,
     /// The parameter tracked through the record [enabled, daily windows].
     pub track: super::TrackConfig,
+    /// The sensor pass: faults found by the verdict and the scans made corrections, and the
+    /// effects' parameters propagated to `θ` [enabled].
+    pub sensor: super::SensorConfig,
 }
 
 impl Default for CloseLoopConfig {
@@ -152,6 +155,7 @@ impl Default for CloseLoopConfig {
             confirm_candidates: 3,
             event_scan: super::EventScanConfig::default(),
             track: super::TrackConfig::default(),
+            sensor: super::SensorConfig::default(),
         }
     }
 }
@@ -334,6 +338,7 @@ impl CloseLoopConfig {
             l.validate()?;
         }
         self.event_scan.validate()?;
+        self.sensor.validate()?;
         self.track.validate()
     }
 }

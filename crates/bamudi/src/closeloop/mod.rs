@@ -49,6 +49,7 @@
 //! ```
 
 mod config;
+mod correct;
 mod effect;
 pub mod effects;
 mod events;
@@ -56,6 +57,7 @@ mod features;
 mod nuisance;
 mod record;
 mod search;
+mod sensor;
 pub(crate) mod stats;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
@@ -71,6 +73,9 @@ pub use effects::LinearTerm;
 pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
 pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperature_range};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
+pub use sensor::{
+    AttributionTest, SensorAction, SensorConfig, SensorFinding, SensorKind, SensorReport,
+};
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 pub use track::{ThetaTrack, TrackAlarm, TrackAnchor, TrackConfig, TrackPoint, TrackState};
 
@@ -277,6 +282,16 @@ pub struct CloseLoopReport {
     /// Wall time of the whole loop on this record (s).
     #[serde(default)]
     pub wall_time_s: f64,
+    /// The sensor pass: every sensor finding with its correction or set-aside span, the
+    /// structure-or-sensor tests, and `θ` with and without the corrections (`None` when
+    /// disabled).
+    #[serde(default)]
+    pub sensor: Option<SensorReport>,
+    /// The sd the accepted effects' and corrections' parameters add to `theta_after` (in
+    /// `θ`'s unit; already in `theta_after`'s sd and interval); `None` when nothing was
+    /// propagated.
+    #[serde(default)]
+    pub theta_after_effect_sd: Option<f64>,
 }
 
 /// Result of [`close_loop`]: the report plus the residual series used for the plots.
@@ -358,12 +373,30 @@ pub fn close_loop_with(
         effects: vec![],
         from_fold: vec![],
     };
+    // the sensor pass first: the loop then looks for effects in corrected readings
+    let findings = match cfg.sensor.enabled {
+        true => correct::pre_pass(&lp, rec, &st)?,
+        false => vec![],
+    };
+    let y_corr = sensor::apply(&findings, &rec.y, &st.mean, &rec.time_h, None).0;
+    let lp = lp.with_y(&y_corr);
+    if !findings.is_empty() {
+        let (model, mean, var) = lp.calibrate(lp.y)?;
+        st = State {
+            model,
+            mean,
+            var,
+            effects: vec![],
+            from_fold: vec![],
+        };
+    }
     let (steps, conclusion) = run_steps(&lp, &mut st, library)?;
     let run = Run {
         before,
         st,
         steps,
         conclusion,
+        findings,
     };
     let mut out = outcome(&lp, rec, run)?;
     out.report.wall_time_s = started.elapsed().as_secs_f64();
@@ -421,6 +454,8 @@ struct Run {
     st: State,
     steps: Vec<StepReport>,
     conclusion: String,
+    /// The sensor pass's findings before selection.
+    findings: Vec<SensorFinding>,
 }
 
 /// The checks, error and `θ` of the first calibration.
@@ -613,6 +648,19 @@ fn with_alarms(
     }
 }
 
+/// The conclusion with the sensor findings first: what was corrected or set aside is said
+/// before anything else, and "no missing effect found" is not said when something was.
+fn with_sensor(conclusion: String, sensor: Option<&SensorReport>) -> String {
+    let Some(s) = sensor.filter(|s| !s.findings.is_empty()) else {
+        return conclusion;
+    };
+    let what: Vec<String> = s.findings.iter().map(SensorFinding::describe).collect();
+    let rest = conclusion
+        .strip_prefix("no missing effect found: ")
+        .unwrap_or(&conclusion);
+    format!("sensor findings: {}; then {rest}", what.join("; "))
+}
+
 /// The whole-record analyses of the final state: the event scan and the parameter's track
 /// (each `None` when disabled).
 fn whole_record(
@@ -748,22 +796,64 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         st,
         steps,
         conclusion,
+        findings,
     } = run;
     let Final {
         st,
-        residual: r_final,
-        rmse: rmse_after,
-        checks: checks_after,
+        residual,
+        rmse,
+        checks: mut checks_after,
     } = final_state(lp, st)?;
-    let (events, theta_track) = whole_record(lp, rec, &st, &r_final)?;
-    let (theta_after, basis) = theta_after(&st, theta_track.as_ref());
+    let post = correct::post_pass(lp, rec, st, residual, findings)?;
+    let rmse_after = match lp.test.is_empty() {
+        true => rmse,
+        false => {
+            // the test window's check on the corrected residual
+            let (r_oos, mask_oos) = correct::out_of_sample(rec, &post, lp.sel.len());
+            checks_after.pop();
+            checks_after.extend(test_window(lp, &r_oos, &post.st.var));
+            sensor::rmse_unmasked(&r_oos, lp.test, &mask_oos)
+        }
+    };
+    let rmse_all_corrections =
+        (!lp.test.is_empty()).then(|| sensor::rmse_unmasked(&post.residual, lp.test, &post.mask));
+    let (events, theta_track) = (post.events.clone(), post.track.clone());
+    let (theta_after, basis) = theta_after(&post.st, theta_track.as_ref());
+    let lp_c = lp.with_y(&post.y);
+    let (theta_after, effect_sd) = correct::propagate(&lp_c, rec, &post, theta_after)?;
+    let sensor_report = lp.cfg.sensor.enabled.then(|| SensorReport {
+        set_aside_cells: post.mask.iter().filter(|m| **m).count(),
+        attribution_tests: post.tests.clone(),
+        theta_with_corrections: (!post.findings.is_empty()).then_some(theta_after),
+        fitted_on_test_rows: post
+            .findings
+            .iter()
+            .any(|f| f.source != "adequacy verdict" && f.to_row > lp.sel.len()),
+        findings: post.findings.clone(),
+        theta_without_corrections: None,
+        heldout_rmse_after_all_corrections: rmse_all_corrections,
+    });
+    let sensor_report = match sensor_report {
+        Some(mut s) => {
+            s.theta_without_corrections = correct::theta_without(&lp_c, rec, &post)?;
+            Some(s)
+        }
+        None => None,
+    };
+    let conclusion = with_sensor(conclusion, sensor_report.as_ref());
     let conclusion = with_alarms(
         conclusion,
         events.as_ref(),
         theta_track.as_ref(),
         &lp.cfg.output_unit,
     );
-    let total = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let st = post.st;
+    let r_final = post.residual;
+    // a gauge set aside over the whole error window has no error (NaN): left out
+    let total = |v: &[f64]| {
+        let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+        (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
+    };
     let w = window_fields(lp, rec);
     let report = CloseLoopReport {
         file: rec.file.clone(),
@@ -798,6 +888,8 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         events,
         theta_track,
         wall_time_s: 0.0,
+        sensor: sensor_report,
+        theta_after_effect_sd: effect_sd,
     };
     Ok(CloseLoopOutcome {
         report,

@@ -69,6 +69,24 @@ pub(super) struct SearchOutcome {
 }
 
 impl Loop<'_> {
+    /// The same loop on other readings `y` (the sensor corrections applied).
+    pub(super) fn with_y<'b>(&'b self, y: &'b DMatrix<f64>) -> Loop<'b> {
+        Loop {
+            calibrator: self.calibrator,
+            x: self.x,
+            y,
+            feats: self.feats,
+            cal: self.cal,
+            val: self.val,
+            sel: self.sel,
+            test: self.test,
+            folds: self.folds,
+            gauges: self.gauges,
+            cfg: self.cfg,
+            nuisance: self.nuisance.clone(),
+        }
+    }
+
     pub(super) fn calibrate(&self, y_adj: &DMatrix<f64>) -> Result<Calibrated> {
         let model = self.calibrator.calibrate(
             &select_rows(self.x, self.cal),
@@ -514,7 +532,7 @@ impl Loop<'_> {
     }
 
     /// The sum of the accepted effects' contributions at every row (microstrain).
-    fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>> {
+    pub(super) fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>> {
         Ok(sum_terms(&self.contributions(st)?, self.y.shape()))
     }
 }

@@ -5,6 +5,7 @@
 
 mod features;
 mod ingest;
+mod sensor;
 
 use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
 use bamudi::closeloop::{

@@ -1,0 +1,352 @@
+//! The loop's sensor pass and the parameter's honest interval after effects: where the
+//! findings of [`super::sensor`] are made, applied and re-run, and where the accepted effects'
+//! parameters are propagated to `θ` (design: `docs/closeloop.md`, "Sensor faults, structure
+//! or sensor, and the gap after a correction").
+
+use super::record::MeasuredRecord;
+use super::search::{Loop, State};
+use super::sensor::{self, AttributionTest, ScanInput, SensorFinding, SensorKind};
+use super::{EventScan, ThetaSummary, ThetaTrack};
+use crate::error::Result;
+use nalgebra::DMatrix;
+use rand::{RngExt, SeedableRng, rngs::StdRng};
+
+/// The findings of the first calibration: its verdict's sensor faults, stuck gauges, channel
+/// exchanges and noise increases. A gauge found stuck or exchanged is not also corrected from
+/// the verdict (its step or offset there is that fault seen through the calibration).
+pub(super) fn pre_pass(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    st: &State,
+) -> Result<Vec<SensorFinding>> {
+    let cfg = &lp.cfg.sensor;
+    let r = lp.y - &st.mean;
+    let inp = ScanInput {
+        rec,
+        residual: &r,
+        fitted: &st.mean,
+        cal: lp.cal,
+        unit: &lp.cfg.output_unit,
+    };
+    let mut found = sensor::stuck_scan(&inp, cfg);
+    let taken = |f: &[SensorFinding], g: usize| f.iter().any(|x| x.gauge_columns.contains(&g));
+    for e in sensor::exchange_scan(&inp, cfg) {
+        if !e.gauge_columns.iter().any(|&g| taken(&found, g)) {
+            found.push(e);
+        }
+    }
+    if let Some(v) = st.model.adequacy() {
+        for f in sensor::from_verdict(&inp, v) {
+            if !taken(&found, f.gauge_columns[0]) {
+                found.push(f);
+            }
+        }
+    }
+    // the noise scan on the residual with those corrections (an exchanged pair's residual
+    // carries the difference of their strains, which is not noise)
+    let (yc, _) = sensor::apply(&found, lp.y, &st.mean, &rec.time_h, None);
+    let rc = &yc - &st.mean;
+    let inp = ScanInput {
+        residual: &rc,
+        ..inp
+    };
+    for f in sensor::noise_scan(&inp, cfg)? {
+        if !taken(&found, f.gauge_columns[0]) {
+            found.push(f);
+        }
+    }
+    for f in &found {
+        log::info!("sensor finding: {}", f.describe());
+    }
+    Ok(found)
+}
+
+/// The whole-record analyses after selection, with the sensor pass's post-selection part:
+/// what the final state leaves, corrected for every sensor finding.
+pub(super) struct PostPass {
+    /// The readings corrected for every finding.
+    pub y: DMatrix<f64>,
+    /// The set-aside cells.
+    pub mask: DMatrix<bool>,
+    /// The final state (effects re-fitted on the corrected readings when a finding came after
+    /// selection).
+    pub st: State,
+    /// Its residual at every row (set-aside cells zero).
+    pub residual: DMatrix<f64>,
+    pub events: Option<EventScan>,
+    pub track: Option<ThetaTrack>,
+    pub findings: Vec<SensorFinding>,
+    pub tests: Vec<AttributionTest>,
+}
+
+/// The scan, the track, and the sensor findings after selection: each change of level on one
+/// gauge alone after the calibration window, and the parameter's change alarm, is tested
+/// structure against sensor ([`sensor::attribute`]); a sensor verdict becomes a correction, and
+/// the effects, the scan and the track are re-run on the corrected readings. The calibration
+/// window is never touched here, so the calibration stands.
+pub(super) fn post_pass(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    st: State,
+    residual: DMatrix<f64>,
+    findings: Vec<SensorFinding>,
+) -> Result<PostPass> {
+    let mask0 = sensor::apply(&findings, lp.y, &st.mean, &rec.time_h, None).1;
+    let mut post = PostPass {
+        y: lp.y.clone(),
+        mask: mask0,
+        st,
+        residual,
+        events: None,
+        track: None,
+        findings,
+        tests: vec![],
+    };
+    zero_masked(&mut post.residual, &post.mask);
+    let (events, track) = super::whole_record(lp, rec, &post.st, &post.residual)?;
+    post.events = events;
+    post.track = track;
+    if !lp.cfg.sensor.enabled {
+        return Ok(post);
+    }
+    let sens = sensor::sensitivity(post.st.model.as_ref(), lp.x)?;
+    let mut added = scan_alarm_findings(lp, rec, &post, &sens);
+    if !added.is_empty() {
+        apply_more(lp, rec, &mut post, &mut added)?;
+    }
+    // the gap alarm guard: once, on the corrected readings
+    if let Some(alarm) = post.track.as_ref().and_then(|t| t.alarm.clone()) {
+        let from = rec
+            .time_h
+            .iter()
+            .position(|&t| t / 24.0 >= alarm.onset_day)
+            .unwrap_or(rec.len() - 1);
+        let fitted = &post.y - &post.residual;
+        let inp = ScanInput {
+            rec,
+            residual: &post.residual,
+            fitted: &fitted,
+            cal: lp.cal,
+            unit: &lp.cfg.output_unit,
+        };
+        let (test, finding) = sensor::attribute("gap alarm", &inp, &sens, from);
+        log::info!(
+            "gap alarm on day {:.2}: {} ({})",
+            alarm.day,
+            test.verdict,
+            test.sensor_hypothesis
+        );
+        post.tests.push(test);
+        if let Some(f) = finding {
+            apply_more(lp, rec, &mut post, &mut vec![f])?;
+        }
+    }
+    Ok(post)
+}
+
+/// Sensor findings from the scan's changes of level on one gauge alone, after the calibration
+/// window (earlier ones are the loop's to fit), each tested against a change of the parameter.
+fn scan_alarm_findings(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &PostPass,
+    sens: &DMatrix<f64>,
+) -> Vec<SensorFinding> {
+    let Some(events) = &post.events else {
+        return vec![];
+    };
+    let fitted = &post.y - &post.residual;
+    let inp = ScanInput {
+        rec,
+        residual: &post.residual,
+        fitted: &fitted,
+        cal: lp.cal,
+        unit: &lp.cfg.output_unit,
+    };
+    let n_cal = lp.cal.len();
+    let mut out: Vec<SensorFinding> = vec![];
+    for a in events
+        .alarms
+        .iter()
+        .filter(|a| a.coincident_gauges.is_empty())
+    {
+        let Some(from) = rec.time_h.iter().position(|&t| t / 24.0 >= a.onset_day) else {
+            continue;
+        };
+        let Some(g) = rec.gauge_names.iter().position(|n| *n == a.gauge) else {
+            continue;
+        };
+        let already = post
+            .findings
+            .iter()
+            .chain(&out)
+            .any(|f| f.gauge_columns.contains(&g) && f.from_row <= from && from < f.to_row);
+        if from < n_cal || already {
+            continue;
+        }
+        let subject = format!("{} change of level", a.gauge);
+        let (test, finding) = sensor::attribute(&subject, &inp, sens, from);
+        log::info!("{subject} on day {:.2}: {}", a.onset_day, test.verdict);
+        // the sensor hypothesis must be about this gauge
+        if let Some(f) = finding.filter(|f| f.gauge_columns.contains(&g)) {
+            out.push(f);
+        }
+    }
+    out
+}
+
+/// Adds findings after selection: the readings corrected again, the effects re-fitted on the
+/// rows selection used (the model as calibrated), the track re-run.
+fn apply_more(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &mut PostPass,
+    added: &mut Vec<SensorFinding>,
+) -> Result<()> {
+    post.findings.append(added);
+    let fill = &post.y - &post.residual;
+    let (y, mask) = sensor::apply(&post.findings, &rec.y, &fill, &rec.time_h, None);
+    let lp2 = lp.with_y(&y);
+    let (mut residual, effects) = match post.st.effects.is_empty() {
+        true => (lp2.residual(&post.st)?, vec![]),
+        false => lp2.refit(&post.st, lp.sel, true)?,
+    };
+    post.st.effects = effects;
+    zero_masked(&mut residual, &mask);
+    // the scan's alarms stand as found (a corrected fault is still news to the operator); the
+    // track is re-run on the corrected readings
+    let track = match lp.cfg.track.enabled {
+        true => Some(super::track_theta(&lp2, rec, &post.st, &residual)?),
+        false => None,
+    };
+    post.y = y;
+    post.mask = mask;
+    post.residual = residual;
+    post.track = track;
+    Ok(())
+}
+
+fn zero_masked(r: &mut DMatrix<f64>, mask: &DMatrix<bool>) {
+    for (v, m) in r.iter_mut().zip(mask.iter()) {
+        if *m {
+            *v = 0.0;
+        }
+    }
+}
+
+/// The sensor report's `θ` without the corrections: a calibration on the raw readings less the
+/// accepted additive effects (`None` when nothing was corrected or the model is held fixed).
+pub(super) fn theta_without(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &PostPass,
+) -> Result<Option<ThetaSummary>> {
+    let corrected = post
+        .findings
+        .iter()
+        .any(|f| f.from_row < lp.cal.len() || f.kind == SensorKind::Gain);
+    if post.findings.is_empty() || post.st.model_fixed() {
+        return Ok(None);
+    }
+    if !corrected {
+        // nothing in the calibration window changed: the calibration is the same
+        return Ok(Some(post.st.model.theta_summary()));
+    }
+    let raw = lp.with_y(&rec.y);
+    let sum = raw.effect_sum(&post.st)?;
+    let (m, _, _) = raw.calibrate(&(&rec.y - sum))?;
+    Ok(Some(m.theta_summary()))
+}
+
+/// `θ` with the uncertainty of the accepted effects' and the corrections' parameters: for each
+/// of `draws` draws, the effects re-fitted on the calibration window to the fitted values plus a
+/// moving-block bootstrap of the residual (blocks of a day), the corrections' sizes drawn from
+/// their normal laws, and the model re-calibrated; the spread of the draws' posterior means
+/// about the loop's estimate is added to its posterior variance (the law of total variance with
+/// the loop's estimate as the centre). Returns `theta` unchanged with no effect and no sized
+/// correction, or when the model is held fixed (the track gives `θ` then).
+pub(super) fn propagate(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &PostPass,
+    theta: ThetaSummary,
+) -> Result<(ThetaSummary, Option<f64>)> {
+    let cfg = &lp.cfg.sensor;
+    let sized = post.findings.iter().any(|f| f.size_sd.is_some());
+    if cfg.uncertainty_draws == 0 || post.st.model_fixed() || (post.st.effects.is_empty() && !sized)
+    {
+        return Ok((theta, None));
+    }
+    // two streams: the bootstrap's draws do not depend on how many corrections there are
+    let mut rng = StdRng::seed_from_u64(cfg.seed);
+    let mut sizes = StdRng::seed_from_u64(cfg.seed.wrapping_add(1));
+    let fitted = &post.y - &post.residual;
+    let cal = lp.cal;
+    let block = 24.min(cal.len());
+    let mut dev2 = 0.0;
+    for _ in 0..cfg.uncertainty_draws {
+        let mut ystar = post.y.clone();
+        let mut k = 0;
+        while k < cal.len() {
+            let start = rng.random_range(0..=cal.len() - block);
+            for j in 0..block.min(cal.len() - k) {
+                let (to, from) = (cal[k + j], cal[start + j]);
+                for g in 0..ystar.ncols() {
+                    ystar[(to, g)] = fitted[(to, g)] + post.residual[(from, g)];
+                }
+            }
+            k += block;
+        }
+        let star = lp.with_y(&ystar);
+        let effects = match post.st.effects.is_empty() {
+            true => vec![],
+            false => star.refit(&post.st, cal, true)?.1,
+        };
+        let z: Vec<f64> = post
+            .findings
+            .iter()
+            .map(|_| numerics::random::standard_normal(&mut sizes))
+            .collect();
+        let (ycorr, _) = sensor::apply(&post.findings, &rec.y, &fitted, &rec.time_h, Some(&z));
+        let drawn = State {
+            effects,
+            ..post.st.clone()
+        };
+        let sum = lp.with_y(&ycorr).effect_sum(&drawn)?;
+        let (m, _, _) = lp.calibrate(&(&ycorr - sum))?;
+        dev2 += (m.theta_summary().mean - theta.mean).powi(2);
+    }
+    let extra = (dev2 / cfg.uncertainty_draws as f64).sqrt();
+    let sd = (theta.sd.powi(2) + extra * extra).sqrt();
+    let scale = sd / theta.sd.max(1e-12);
+    let widened = ThetaSummary {
+        mean: theta.mean,
+        sd,
+        ci95: (
+            theta.mean - (theta.mean - theta.ci95.0) * scale,
+            theta.mean + (theta.ci95.1 - theta.mean) * scale,
+        ),
+    };
+    Ok((widened, Some(extra)))
+}
+
+/// The residual with only the corrections whose span starts before the test window (`n_sel`
+/// rows selection used), and their set-aside cells: the error a correction found in the test
+/// window itself would make in-sample is not reported as out-of-sample.
+pub(super) fn out_of_sample(
+    rec: &MeasuredRecord,
+    post: &PostPass,
+    n_sel: usize,
+) -> (DMatrix<f64>, DMatrix<bool>) {
+    let early: Vec<SensorFinding> = post
+        .findings
+        .iter()
+        .filter(|f| f.from_row < n_sel)
+        .cloned()
+        .collect();
+    let fitted = &post.y - &post.residual;
+    let (y, mask) = sensor::apply(&early, &rec.y, &fitted, &rec.time_h, None);
+    let mut r = &y - &fitted;
+    zero_masked(&mut r, &mask);
+    (r, mask)
+}

@@ -1,0 +1,857 @@
+//! Sensor findings made corrections: the observation model of the loop.
+//!
+//! A sensor fault changes what a gauge reports, not what the gate does. The loop looks for
+//! faults in four places and turns each finding into a correction of the readings (a fitted
+//! observation-model effect with its size and sd) or, when the reading carries no usable
+//! information (a stuck gauge, a gauge whose noise jumped), sets the gauge aside for the
+//! affected span:
+//!
+//! * the first calibration's adequacy verdict, when it attributes its failures to sensors
+//!   (`sensor_gain`, `sensor_offset`, `sensor_drift`, `sensor_step` on one or two gauges,
+//!   jointly fitted with the calibration: [`crate::adequacy`]); a discrepancy can absorb a
+//!   gain so that the residual looks clean, and only the verdict sees it;
+//! * the exchange scan: every pair of gauges, the onset at which exchanging their readings
+//!   from then on lowers the residual sum of squares most; a finding when the decrease exceeds
+//!   a modified-BIC penalty;
+//! * the stuck scan (a reading that repeats exactly) and the noise scan (a change of level of
+//!   the log squared first differences of one gauge's residual);
+//! * after selection, every change of level the whole-record scan finds on one gauge alone
+//!   after the calibration window, unless a change of the parameter explains it better
+//!   ([`attribute`]), and the parameter's change alarm, which is withheld when a sensor
+//!   hypothesis explains the change better (the gap alarm guard).
+//!
+//! Corrections are applied to the readings before the loop's calibrations; set-aside cells
+//! are replaced by the model's prediction and left out of every error the report states.
+
+use super::record::MeasuredRecord;
+use crate::adequacy::{AdequacyReport, FaultKind};
+use crate::error::{BamudiError, Result};
+use nalgebra::DMatrix;
+use serde::{Deserialize, Serialize};
+
+/// Settings of the sensor pass (TOML section `[sensor]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SensorConfig {
+    /// Look for sensor faults and correct them [true].
+    pub enabled: bool,
+    /// Penalty of one change found by a scan (exchange, noise), in units of `ln n` of the
+    /// residual sum of squares over the noise variance, as the event scan's modified BIC [3].
+    pub penalty_per_change_ln_n: f64,
+    /// Fewest rows a stuck reading must repeat, and a noise change must last [12].
+    pub min_span_rows: usize,
+    /// Smallest ratio of noise sd after / before for a gauge to be set aside [2].
+    pub noise_ratio: f64,
+    /// Draws of the accepted effects' and corrections' parameters propagated to `θ` (one
+    /// calibration each; 0 = the last calibration's posterior alone) [4].
+    pub uncertainty_draws: usize,
+    /// Seed of those draws [58].
+    pub seed: u64,
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            penalty_per_change_ln_n: 3.0,
+            min_span_rows: 12,
+            noise_ratio: 2.0,
+            uncertainty_draws: 4,
+            seed: 58,
+        }
+    }
+}
+
+impl SensorConfig {
+    pub(super) fn validate(&self) -> Result<()> {
+        let bad = |key: &'static str, why: &str| Err(BamudiError::config(key, why.to_string()));
+        if !(self.penalty_per_change_ln_n > 0.0 && self.penalty_per_change_ln_n.is_finite()) {
+            return bad("sensor.penalty_per_change_ln_n", "must be positive");
+        }
+        if self.min_span_rows < 3 {
+            return bad("sensor.min_span_rows", "must be at least 3");
+        }
+        if !(self.noise_ratio > 1.0 && self.noise_ratio.is_finite()) {
+            return bad("sensor.noise_ratio", "must be above 1");
+        }
+        Ok(())
+    }
+}
+
+/// What kind of sensor fault a finding is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorKind {
+    /// The gauge factor is off: reading = (1 + k) × strain over the span (`size` = k).
+    Gain,
+    /// A constant added to the reading (`size` in output units).
+    Offset,
+    /// A linear drift (`size` = the change over the reference span, output units).
+    Drift,
+    /// A step in the zero from the span's start (`size` in output units).
+    Step,
+    /// Two channels exchanged from the span's start (wiring, logger remapping).
+    ChannelExchange,
+    /// The reading repeats exactly (a stuck or dead gauge): set aside.
+    Stuck,
+    /// The gauge's noise grew by `size` (ratio of sds): set aside.
+    NoiseIncrease,
+}
+
+impl SensorKind {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Gain => "gain",
+            Self::Offset => "offset",
+            Self::Drift => "drift",
+            Self::Step => "step",
+            Self::ChannelExchange => "channel_exchange",
+            Self::Stuck => "stuck",
+            Self::NoiseIncrease => "noise_increase",
+        }
+    }
+}
+
+/// Corrected, or set aside for the span.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SensorAction {
+    /// The readings are corrected by the fitted fault.
+    Corrected,
+    /// The readings of the span are not used.
+    SetAside,
+}
+
+/// One sensor finding and what the loop did with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensorFinding {
+    /// Fault kind.
+    pub kind: SensorKind,
+    /// Gauge(s) (two for an exchange).
+    pub gauges: Vec<String>,
+    /// Their columns.
+    pub gauge_columns: Vec<usize>,
+    /// First row of the span.
+    pub from_row: usize,
+    /// One past the last row of the span.
+    pub to_row: usize,
+    /// Day of the span's first row (days since the first row).
+    pub from_day: f64,
+    /// Day of the span's last row.
+    pub to_day: f64,
+    /// Fitted size (see [`SensorKind`]); `None` for an exchange or a stuck gauge.
+    pub size: Option<f64>,
+    /// Its standard deviation.
+    pub size_sd: Option<f64>,
+    /// Unit of `size` (output units, `fraction` for a gain, `ratio` for noise).
+    pub unit: String,
+    /// For a drift: the days its `size` is the change over (the shift is zero at their middle).
+    pub reference_days: Option<(f64, f64)>,
+    /// Corrected or set aside.
+    pub action: SensorAction,
+    /// Which analysis found it.
+    pub source: String,
+    /// The evidence in words.
+    pub evidence: String,
+}
+
+impl SensorFinding {
+    /// `"SG3 gain +0.050 ± 0.004 fraction from day 0.0 (adequacy verdict)"`.
+    pub fn describe(&self) -> String {
+        let size = match (self.size, self.size_sd) {
+            (Some(s), Some(sd)) => format!(" {s:+.3} ± {sd:.3} {}", self.unit),
+            (Some(s), None) => format!(" {s:+.3} {}", self.unit),
+            _ => String::new(),
+        };
+        format!(
+            "{} {}{size} from day {:.2} to {:.2}, {} ({})",
+            self.gauges.join("<->"),
+            self.kind.name(),
+            self.from_day,
+            self.to_day,
+            match self.action {
+                SensorAction::Corrected => "corrected",
+                SensorAction::SetAside => "set aside",
+            },
+            self.source
+        )
+    }
+}
+
+/// The structure-or-sensor test of one change (see [`attribute`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AttributionTest {
+    /// What was tested (`gap alarm`, or a gauge's change of level).
+    pub subject: String,
+    /// Day the tested rows start.
+    pub from_day: f64,
+    /// Residual sum of squares over the noise variance, no change.
+    pub none: f64,
+    /// The same with the best change of the parameter (one size; the model's sensitivities).
+    pub structure: f64,
+    /// The same with the best sensor hypothesis.
+    pub sensor: f64,
+    /// That hypothesis, e.g. `SG3 step`.
+    pub sensor_hypothesis: String,
+    /// Penalty the sensor side pays for choosing among its hypotheses (`2 ln m`).
+    pub penalty: f64,
+    /// `sensor` or `structure`.
+    pub verdict: String,
+}
+
+/// Everything the sensor pass found and did (`sensor` in `results.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct SensorReport {
+    /// The findings in the order they were applied.
+    pub findings: Vec<SensorFinding>,
+    /// Cells (row × gauge) set aside.
+    pub set_aside_cells: usize,
+    /// The structure-or-sensor tests run.
+    pub attribution_tests: Vec<AttributionTest>,
+    /// `θ` of a calibration on the same rows with the accepted effects but without the
+    /// sensor corrections (`None` when nothing was corrected).
+    pub theta_without_corrections: Option<super::ThetaSummary>,
+    /// `θ` with them (the loop's `theta_after`).
+    pub theta_with_corrections: Option<super::ThetaSummary>,
+    /// Whether a correction was fitted on rows of the test window (its error after is then
+    /// not out of sample for that gauge and span).
+    pub fitted_on_test_rows: bool,
+    /// Per gauge, the test window's RMSE with every correction, those that start in the test
+    /// window too (fitted on its rows: in-sample); the report's `heldout_rmse_after` counts
+    /// only the corrections that start before it (output units; `None` without a test window).
+    pub heldout_rmse_after_all_corrections: Option<Vec<f64>>,
+}
+
+/// The readings with every correction applied, and the set-aside cells (`true`), whose
+/// readings are replaced by `fill` (the model's prediction). `draw[k]`, when given, replaces
+/// finding `k`'s size by a draw (standard normal times its sd added).
+pub(crate) fn apply(
+    findings: &[SensorFinding],
+    y: &DMatrix<f64>,
+    fill: &DMatrix<f64>,
+    time_h: &[f64],
+    draw: Option<&[f64]>,
+) -> (DMatrix<f64>, DMatrix<bool>) {
+    let mut out = y.clone();
+    let mut mask = DMatrix::from_element(y.nrows(), y.ncols(), false);
+    for (k, f) in findings.iter().enumerate() {
+        let size = f.size.unwrap_or(0.0) + draw.map_or(0.0, |d| d[k] * f.size_sd.unwrap_or(0.0));
+        let g = f.gauge_columns[0];
+        let span = f.from_row..f.to_row.min(y.nrows());
+        match f.kind {
+            SensorKind::Gain => span.for_each(|i| out[(i, g)] /= 1.0 + size),
+            SensorKind::Offset | SensorKind::Step => span.for_each(|i| out[(i, g)] -= size),
+            SensorKind::Drift => {
+                let (a, b) = f.reference_days.unwrap_or((f.from_day, f.to_day));
+                let len = (b - a).max(1e-9);
+                for i in span {
+                    out[(i, g)] -= size * ((time_h[i] / 24.0 - a) / len - 0.5);
+                }
+            }
+            SensorKind::ChannelExchange => {
+                let h = f.gauge_columns[1];
+                for i in span {
+                    let t = out[(i, g)];
+                    out[(i, g)] = out[(i, h)];
+                    out[(i, h)] = t;
+                }
+            }
+            SensorKind::Stuck | SensorKind::NoiseIncrease => {
+                for i in span {
+                    mask[(i, g)] = true;
+                    out[(i, g)] = fill[(i, g)];
+                }
+            }
+        }
+    }
+    (out, mask)
+}
+
+/// What the scans read: the record, the residual of the current model and its mean.
+pub(crate) struct ScanInput<'a> {
+    pub rec: &'a MeasuredRecord,
+    /// Data − model mean (− accepted effects), every row.
+    pub residual: &'a DMatrix<f64>,
+    /// The model's prediction (mean + accepted effects), every row.
+    pub fitted: &'a DMatrix<f64>,
+    /// The calibration window's rows.
+    pub cal: &'a [usize],
+    pub unit: &'a str,
+}
+
+impl ScanInput<'_> {
+    fn day(&self, i: usize) -> f64 {
+        self.rec.time_h[i.min(self.rec.len() - 1)] / 24.0
+    }
+
+    fn finding(
+        &self,
+        kind: SensorKind,
+        gauges: Vec<usize>,
+        span: (usize, usize),
+        size: (Option<f64>, Option<f64>, &str),
+        source: &str,
+        evidence: String,
+    ) -> SensorFinding {
+        SensorFinding {
+            kind,
+            gauges: gauges
+                .iter()
+                .map(|&g| self.rec.gauge_names[g].clone())
+                .collect(),
+            gauge_columns: gauges,
+            from_row: span.0,
+            to_row: span.1,
+            from_day: self.day(span.0),
+            to_day: self.day(span.1.saturating_sub(1)),
+            size: size.0,
+            size_sd: size.1,
+            unit: size.2.to_string(),
+            reference_days: None,
+            action: match kind {
+                SensorKind::Stuck | SensorKind::NoiseIncrease => SensorAction::SetAside,
+                _ => SensorAction::Corrected,
+            },
+            source: source.into(),
+            evidence,
+        }
+    }
+}
+
+/// The faults the calibration's own verdict attributed to sensors, as corrections over the
+/// whole record (a step from its position). Positions are fractions of the calibration's rows,
+/// taken as evenly spread over the calibration window.
+pub(crate) fn from_verdict(inp: &ScanInput<'_>, verdict: &AdequacyReport) -> Vec<SensorFinding> {
+    let Some(corr) = &verdict.sensor_correction else {
+        return vec![];
+    };
+    let n = inp.rec.len();
+    let (c0, c1) = (inp.cal[0], *inp.cal.last().unwrap_or(&inp.cal[0]));
+    let (d0, d1) = (inp.day(c0), inp.day(c1));
+    corr.faults
+        .iter()
+        .filter_map(|f| {
+            let g = inp.rec.gauge_names.iter().position(|n| *n == f.gauge)?;
+            let evidence = format!(
+                "the calibration's adequacy verdict: sensor_{} on {} (z {:.1}, joint fit)",
+                f.kind.name(),
+                f.gauge,
+                f.z
+            );
+            let src = "adequacy verdict";
+            let unit = inp.unit;
+            Some(match f.kind {
+                FaultKind::Gain => inp.finding(
+                    SensorKind::Gain,
+                    vec![g],
+                    (0, n),
+                    (Some(f.estimate), Some(f.sd), "fraction"),
+                    src,
+                    evidence,
+                ),
+                FaultKind::Offset => inp.finding(
+                    SensorKind::Offset,
+                    vec![g],
+                    (0, n),
+                    (Some(f.estimate), Some(f.sd), unit),
+                    src,
+                    evidence,
+                ),
+                FaultKind::Drift => {
+                    let mut d = inp.finding(
+                        SensorKind::Drift,
+                        vec![g],
+                        (0, n),
+                        (Some(f.estimate), Some(f.sd), unit),
+                        src,
+                        evidence,
+                    );
+                    d.reference_days = Some((d0, d1));
+                    d
+                }
+                FaultKind::Step => {
+                    let at = f.at_fraction.unwrap_or(0.5);
+                    let row = inp.cal[((at * (inp.cal.len() - 1) as f64).round() as usize)
+                        .min(inp.cal.len() - 1)];
+                    inp.finding(
+                        SensorKind::Step,
+                        vec![g],
+                        (row, n),
+                        (Some(f.estimate), Some(f.sd), unit),
+                        src,
+                        evidence,
+                    )
+                }
+            })
+        })
+        .collect()
+}
+
+/// Per gauge, the white-noise variance of the residual from first differences.
+fn noise_var(r: &DMatrix<f64>) -> Vec<f64> {
+    (0..r.ncols())
+        .map(|g| {
+            let col: Vec<f64> = r.column(g).iter().copied().collect();
+            numerics::robust::noise_sd_from_differences(&col)
+                .max(1e-9)
+                .powi(2)
+        })
+        .collect()
+}
+
+/// Channel exchanges: for every pair `(a, b)` and onset `τ`, the decrease of the residual sum
+/// of squares when their readings are exchanged from `τ` to the end, over the noise variance
+/// (the larger of the two gauges'); a finding when its best exceeds
+/// `penalty_per_change_ln_n · ln n + 2 ln(pairs)` and the exchange also beats a free level
+/// change on each gauge (an exchange is a specific pattern; two steps are not one).
+pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<SensorFinding> {
+    let (r, m) = (inp.residual, inp.fitted);
+    let (n, k) = (r.nrows(), r.ncols());
+    if n < 2 * cfg.min_span_rows || k < 2 {
+        return vec![];
+    }
+    let var = noise_var(r);
+    let pairs = (k * (k - 1) / 2) as f64;
+    let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * pairs.ln();
+    let mut found: Vec<(f64, usize, usize, usize)> = vec![];
+    for a in 0..k {
+        for b in a + 1..k {
+            let s2 = var[a].max(var[b]);
+            // suffix sums of the gain of exchanging at each row
+            let mut best = (0.0, n);
+            let mut s = 0.0;
+            for i in (cfg.min_span_rows.min(n)..n).rev() {
+                let ya = r[(i, a)] + m[(i, a)];
+                let yb = r[(i, b)] + m[(i, b)];
+                let before = r[(i, a)].powi(2) + r[(i, b)].powi(2);
+                let after = (yb - m[(i, a)]).powi(2) + (ya - m[(i, b)]).powi(2);
+                s += (before - after) / s2;
+                if n - i >= cfg.min_span_rows.min(8) && s > best.0 {
+                    best = (s, i);
+                }
+            }
+            if best.0 > threshold {
+                found.push((best.0, a, b, best.1));
+            }
+        }
+    }
+    // the strongest exchange per gauge: a gauge is exchanged with one other
+    found.sort_by(|x, y| y.0.total_cmp(&x.0));
+    let mut used = vec![false; k];
+    let mut out = vec![];
+    for (stat, a, b, at) in found {
+        if used[a] || used[b] || !beats_two_steps(r, m, a, b, at, stat, &var) {
+            continue;
+        }
+        used[a] = true;
+        used[b] = true;
+        out.push(inp.finding(
+            SensorKind::ChannelExchange,
+            vec![a, b],
+            (at, n),
+            (None, None, ""),
+            "exchange scan",
+            format!(
+                "exchanging {} and {} from day {:.2} lowers the residual sum of squares by {stat:.0} noise variances (threshold {threshold:.1})",
+                inp.rec.gauge_names[a],
+                inp.rec.gauge_names[b],
+                inp.day(at)
+            ),
+        ));
+    }
+    out
+}
+
+/// Whether exchanging `a` and `b` from `at` lowers the residual more than a free level change
+/// of each gauge from `at` (two parameters).
+fn beats_two_steps(
+    r: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    a: usize,
+    b: usize,
+    at: usize,
+    exchange_gain: f64,
+    var: &[f64],
+) -> bool {
+    let n = r.nrows();
+    let s2 = var[a].max(var[b]);
+    let level_gain = |g: usize| {
+        let v: Vec<f64> = (at..n).map(|i| r[(i, g)]).collect();
+        let mean = v.iter().sum::<f64>() / v.len() as f64;
+        v.len() as f64 * mean * mean / s2
+    };
+    let _ = m;
+    exchange_gain > level_gain(a) + level_gain(b) + 2.0 * (n as f64).ln()
+}
+
+/// Stuck gauges: a reading that repeats exactly for at least `min_span_rows` rows; the gauge is
+/// set aside over the repeat.
+pub(crate) fn stuck_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<SensorFinding> {
+    let y = &inp.rec.y;
+    let (n, k) = (y.nrows(), y.ncols());
+    let mut out = vec![];
+    for g in 0..k {
+        let mut start = 0;
+        for i in 1..=n {
+            let same = i < n && (y[(i, g)] - y[(i - 1, g)]).abs() <= 1e-9 * (1.0 + y[(i, g)].abs());
+            if same {
+                continue;
+            }
+            if i - start >= cfg.min_span_rows {
+                out.push(inp.finding(
+                    SensorKind::Stuck,
+                    vec![g],
+                    (start, i),
+                    (Some(y[(start, g)]), None, inp.unit),
+                    "stuck scan",
+                    format!(
+                        "{} reads {:.3} for {} rows in a row",
+                        inp.rec.gauge_names[g],
+                        y[(start, g)],
+                        i - start
+                    ),
+                ));
+            }
+            start = i;
+        }
+    }
+    out
+}
+
+/// Noise increases: on each gauge, changes of level of `ln(d²)` (`d` the residual's first
+/// differences) by the event scan's method; an increase by at least `2 ln(noise_ratio)` (the
+/// sd ratio) on one or two gauges sets the gauge aside until the level falls back. Three or
+/// more gauges at once are not a sensor (the model's misfit grew).
+pub(crate) fn noise_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Result<Vec<SensorFinding>> {
+    use numerics::changepoint::{MeanChangeParams, detect_mean_changes};
+    let r = inp.residual;
+    let (n, k) = (r.nrows(), r.ncols());
+    if n < 4 * cfg.min_span_rows {
+        return Ok(vec![]);
+    }
+    let params = MeanChangeParams {
+        min_segment: cfg.min_span_rows,
+        penalty_per_change_ln_n: cfg.penalty_per_change_ln_n,
+        ..MeanChangeParams::default()
+    };
+    let jump = 2.0 * cfg.noise_ratio.ln();
+    let mut out = vec![];
+    for g in 0..k {
+        let z: Vec<f64> = (1..n)
+            .map(|i| ((r[(i, g)] - r[(i - 1, g)]).powi(2) + 1e-12).ln())
+            .collect();
+        let found = detect_mean_changes(&z, &params).map_err(|e| BamudiError::Numerical {
+            context: format!("noise scan of gauge {}", inp.rec.gauge_names[g]),
+            reason: e.to_string(),
+        })?;
+        for (j, c) in found.changes.iter().enumerate() {
+            if c.size < jump {
+                continue;
+            }
+            let from = c.first_row_after + 1;
+            let to = found
+                .changes
+                .get(j + 1)
+                .map_or(n, |next| next.first_row_after + 1);
+            let ratio = (0.5 * c.size).exp();
+            out.push(inp.finding(
+                SensorKind::NoiseIncrease,
+                vec![g],
+                (from, to),
+                (Some(ratio), Some(ratio * 0.5 * c.size_sd), "ratio"),
+                "noise scan",
+                format!(
+                    "the noise of {} grows {ratio:.1}-fold on day {:.2}",
+                    inp.rec.gauge_names[g],
+                    inp.day(from)
+                ),
+            ));
+        }
+    }
+    let gauges: std::collections::BTreeSet<usize> =
+        out.iter().map(|f| f.gauge_columns[0]).collect();
+    Ok(if gauges.len() >= 3 { vec![] } else { out })
+}
+
+/// The structure-or-sensor test of a change starting at `from` on the residual `r` (every
+/// gauge, rows `from..n`): the best change of the parameter, `Δ · J` with `J` the model's
+/// sensitivity to it at each row (one size for every gauge), against the best sensor
+/// hypothesis on one gauge (a step, a gain change `k · fitted`) or a pair (an exchange of
+/// readings), each scored by its residual sum of squares over the noise variance. Both sides
+/// fit one size (the exchange none), so the sensor side pays `2 ln m` for choosing among its
+/// `m` hypotheses. Sensor when its score plus that penalty is below the structure's.
+pub(crate) fn attribute(
+    subject: &str,
+    inp: &ScanInput<'_>,
+    sensitivity: &DMatrix<f64>,
+    from: usize,
+) -> (AttributionTest, Option<SensorFinding>) {
+    let (r, m) = (inp.residual, inp.fitted);
+    let (n, k) = (r.nrows(), r.ncols());
+    let var = noise_var(r);
+    let rows = from..n;
+    let none: f64 = (0..k)
+        .map(|g| rows.clone().map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
+        .sum();
+    // structure: one Δ, weighted least squares over every gauge
+    let (mut jr, mut jj) = (0.0, 0.0);
+    for g in 0..k {
+        for i in rows.clone() {
+            jr += sensitivity[(i, g)] * r[(i, g)] / var[g];
+            jj += sensitivity[(i, g)].powi(2) / var[g];
+        }
+    }
+    let structure = none - if jj > 0.0 { jr * jr / jj } else { 0.0 };
+    // sensor: one gauge's step or gain change, or one pair's exchange
+    let mut best: (f64, String, Option<SensorFinding>) = (f64::INFINITY, String::new(), None);
+    let len = (n - from) as f64;
+    for g in 0..k {
+        let sum: f64 = rows.clone().map(|i| r[(i, g)]).sum();
+        let step = none - sum * sum / len / var[g];
+        let (mr, mm) = rows.clone().fold((0.0, 0.0), |(a, b), i| {
+            let truth = m[(i, g)];
+            (a + truth * r[(i, g)], b + truth * truth)
+        });
+        let gain = none - if mm > 0.0 { mr * mr / mm / var[g] } else { 0.0 };
+        let name = &inp.rec.gauge_names[g];
+        if step < best.0 {
+            let sd = (var[g] / len).sqrt();
+            let f = inp.finding(
+                SensorKind::Step,
+                vec![g],
+                (from, n),
+                (Some(sum / len), Some(sd), inp.unit),
+                "structure-or-sensor test",
+                String::new(),
+            );
+            best = (step, format!("{name} step"), Some(f));
+        }
+        if gain < best.0 && mm > 0.0 {
+            let f = inp.finding(
+                SensorKind::Gain,
+                vec![g],
+                (from, n),
+                (Some(mr / mm), Some((var[g] / mm).sqrt()), "fraction"),
+                "structure-or-sensor test",
+                String::new(),
+            );
+            best = (gain, format!("{name} gain change"), Some(f));
+        }
+    }
+    for a in 0..k {
+        for b in a + 1..k {
+            let mut score = none;
+            for i in rows.clone() {
+                let (ya, yb) = (r[(i, a)] + m[(i, a)], r[(i, b)] + m[(i, b)]);
+                score -= r[(i, a)].powi(2) / var[a] + r[(i, b)].powi(2) / var[b];
+                score += (yb - m[(i, a)]).powi(2) / var[a] + (ya - m[(i, b)]).powi(2) / var[b];
+            }
+            if score < best.0 {
+                let f = inp.finding(
+                    SensorKind::ChannelExchange,
+                    vec![a, b],
+                    (from, n),
+                    (None, None, ""),
+                    "structure-or-sensor test",
+                    String::new(),
+                );
+                let names = &inp.rec.gauge_names;
+                best = (
+                    score,
+                    format!("{}<->{} exchange", names[a], names[b]),
+                    Some(f),
+                );
+            }
+        }
+    }
+    let m_hyp = (2 * k + k * (k - 1) / 2) as f64;
+    let penalty = 2.0 * m_hyp.ln();
+    let sensor_wins = best.0 + penalty < structure;
+    let test = AttributionTest {
+        subject: subject.into(),
+        from_day: inp.day(from),
+        none,
+        structure,
+        sensor: best.0,
+        sensor_hypothesis: best.1.clone(),
+        penalty,
+        verdict: if sensor_wins { "sensor" } else { "structure" }.into(),
+    };
+    let finding = best.2.filter(|_| sensor_wins).map(|mut f| {
+        f.evidence = format!(
+            "{subject} from day {:.2}: {} explains the change better than a change of the parameter (residual sum of squares {:.0} + penalty {penalty:.1} against {:.0} noise variances)",
+            test.from_day, best.1, best.0, structure
+        );
+        f
+    });
+    (test, finding)
+}
+
+/// The model's sensitivity to its parameter at every row: half the difference of its means at
+/// `θ ± h` over `h` (output units per unit of `θ`).
+pub(crate) fn sensitivity(
+    model: &dyn super::CalibratedModel,
+    x: &DMatrix<f64>,
+) -> Result<DMatrix<f64>> {
+    let t = model.theta_summary();
+    let (lo, hi) = model.theta_bounds();
+    let h = (0.005 * (hi - lo)).max(1e-6);
+    let (a, b) = ((t.mean - h).max(lo), (t.mean + h).min(hi));
+    let at = model.predict_at_thetas(x, &[a, b])?;
+    Ok((&at[1] - &at[0]) / (b - a).max(1e-12))
+}
+
+/// RMSE per gauge over `rows`, the set-aside cells left out (`NaN` for a gauge with none left).
+pub(crate) fn rmse_unmasked(r: &DMatrix<f64>, rows: &[usize], mask: &DMatrix<bool>) -> Vec<f64> {
+    (0..r.ncols())
+        .map(|g| {
+            let (s, c) = rows
+                .iter()
+                .filter(|&&i| !mask[(i, g)])
+                .fold((0.0, 0usize), |(s, c), &i| (s + r[(i, g)].powi(2), c + 1));
+            if c == 0 {
+                f64::NAN
+            } else {
+                (s / c as f64).sqrt()
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(y: DMatrix<f64>) -> MeasuredRecord {
+        let n = y.nrows();
+        MeasuredRecord {
+            file: "t.csv".into(),
+            start_unix_s: 0.0,
+            time_h: (0..n).map(|i| i as f64).collect(),
+            input_names: vec![],
+            x: DMatrix::zeros(n, 0),
+            gauge_names: (0..y.ncols()).map(|g| format!("SG{}", g + 1)).collect(),
+            y,
+            covariate_names: vec![],
+            covariates: DMatrix::zeros(n, 0),
+            source_lines: (0..n as u64).collect(),
+            dropped_missing: 0,
+            imputed: 0,
+        }
+    }
+
+    /// A deterministic "noise" of sd about 1 (no random draws needed).
+    fn wiggle(i: usize, g: usize) -> f64 {
+        ((i * 7 + g * 13) as f64 * 1.618).sin() * 1.4
+    }
+
+    #[test]
+    fn an_exchange_is_found_from_its_day_and_undone() {
+        let n = 400;
+        let truth = |i: usize, g: usize| (g as f64 + 1.0) * 10.0 * ((i as f64) / 9.0).sin();
+        let swap_at = 300;
+        let y = DMatrix::from_fn(n, 4, |i, g| {
+            let g2 = match (i >= swap_at, g) {
+                (true, 1) => 3,
+                (true, 3) => 1,
+                _ => g,
+            };
+            truth(i, g2) + wiggle(i, g)
+        });
+        let fitted = DMatrix::from_fn(n, 4, truth);
+        let r = &y - &fitted;
+        let rec = record(y.clone());
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &r,
+            fitted: &fitted,
+            cal: &(0..200).collect::<Vec<_>>(),
+            unit: "microstrain",
+        };
+        let f = exchange_scan(&inp, &SensorConfig::default());
+        assert_eq!(f.len(), 1, "{f:?}");
+        assert_eq!(f[0].gauges, vec!["SG2", "SG4"]);
+        assert!(
+            (f[0].from_row as i64 - swap_at as i64).abs() <= 2,
+            "{}",
+            f[0].from_row
+        );
+        let (fixed, _) = apply(&f, &y, &fitted, &rec.time_h, None);
+        let left = (&fixed - &fitted).abs().max();
+        assert!(left < 10.0, "{left}");
+        // a clean record: nothing
+        let clean = DMatrix::from_fn(n, 4, |i, g| truth(i, g) + wiggle(i, g));
+        let rc = &clean - &fitted;
+        let rec = record(clean);
+        let inp = ScanInput {
+            residual: &rc,
+            rec: &rec,
+            ..inp
+        };
+        assert!(exchange_scan(&inp, &SensorConfig::default()).is_empty());
+    }
+
+    #[test]
+    fn a_stuck_gauge_is_set_aside_and_noise_is_not_stuck() {
+        let n = 200;
+        let mut y = DMatrix::from_fn(n, 3, |i, g| wiggle(i, g));
+        for i in 150..n {
+            y[(i, 2)] = 0.0; // a dead channel reads zero
+        }
+        let fitted = DMatrix::zeros(n, 3);
+        let rec = record(y.clone());
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &y,
+            fitted: &fitted,
+            cal: &(0..100).collect::<Vec<_>>(),
+            unit: "microstrain",
+        };
+        let f = stuck_scan(&inp, &SensorConfig::default());
+        assert_eq!(f.len(), 1);
+        assert_eq!(
+            (f[0].gauges[0].as_str(), f[0].from_row, f[0].to_row),
+            ("SG3", 150, n)
+        );
+        let (_, mask) = apply(&f, &y, &fitted, &rec.time_h, None);
+        assert_eq!(mask.iter().filter(|m| **m).count(), 50);
+    }
+
+    #[test]
+    fn one_gauge_is_a_sensor_and_the_sensitivity_pattern_is_the_structure() {
+        let n = 300;
+        let load = |i: usize| 1.0 + ((i as f64) / 5.0).sin().abs() * 3.0;
+        // sensitivities of four gauges, different per gauge and varying with the load
+        let sens = DMatrix::from_fn(n, 4, |i, g| load(i) * [0.8, -0.5, 0.3, 1.1][g]);
+        let fitted = DMatrix::from_fn(n, 4, |i, g| 20.0 * load(i) * (g as f64 + 1.0));
+        let rec = record(fitted.clone());
+        let from = 200;
+        let cal: Vec<usize> = (0..150).collect();
+        // a change of the parameter by 4 units from row 200
+        let r = DMatrix::from_fn(n, 4, |i, g| {
+            wiggle(i, g) + if i >= from { 4.0 * sens[(i, g)] } else { 0.0 }
+        });
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &r,
+            fitted: &fitted,
+            cal: &cal,
+            unit: "microstrain",
+        };
+        let (t, f) = attribute("gap alarm", &inp, &sens, from);
+        assert_eq!(t.verdict, "structure", "{t:?}");
+        assert!(f.is_none());
+        // a step of 3 on gauge 3 only
+        let r = DMatrix::from_fn(n, 4, |i, g| {
+            wiggle(i, g) + if i >= from && g == 2 { 3.0 } else { 0.0 }
+        });
+        let inp = ScanInput {
+            residual: &r,
+            ..inp
+        };
+        let (t, f) = attribute("gap alarm", &inp, &sens, from);
+        assert_eq!(t.verdict, "sensor", "{t:?}");
+        assert_eq!(f.map(|f| f.kind), Some(SensorKind::Step));
+    }
+}
