@@ -12,7 +12,8 @@
 //!
 //! Every part is one coverage study (`bamudi_gate::coverage`) written to
 //! `<out>/<part>.json` as it finishes (with the running log `<part>.json.partial.jsonl`
-//! meanwhile): a stopped run resumes by skipping the parts already written. `--render` (also
+//! meanwhile): a stopped run resumes by skipping the parts already written, and a part stopped
+//! midway is read from its log (marked so) until its log is moved away. `--render` (also
 //! run after the parts) writes `<out>/../validation.md` from whatever parts exist.
 
 use anyhow::{Context, Result, bail};
@@ -160,6 +161,16 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
             eprintln!("{}: {} exists, skipped", part.name, json.display());
             continue;
         }
+        let log = crate::coverage::log_path(&json);
+        if log.exists() {
+            eprintln!(
+                "{}: {} holds a stopped run, skipped (the tables read it; move it away to run \
+                 the part again)",
+                part.name,
+                log.display()
+            );
+            continue;
+        }
         eprintln!("{}: running", part.name);
         let report = crate::coverage::study(&part.opts, Some(&json))?;
         bamudi::data::write_atomic(&json, report.to_json()?.as_bytes())?;
@@ -176,15 +187,57 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
     Ok(())
 }
 
-fn read(path: &Path) -> Result<Option<CoverageReport>> {
-    if !path.exists() {
+/// A part's report, or, for a part stopped before it finished, the replicates its running
+/// log holds (`stopped` set: the table says so, and its R column is what was run).
+struct Read {
+    report: CoverageReport,
+    stopped: bool,
+}
+
+fn read(path: &Path) -> Result<Option<Read>> {
+    if path.exists() {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let report = serde_json::from_str(&text)
+            .with_context(|| format!("parsing {}", path.display()))?;
+        return Ok(Some(Read {
+            report,
+            stopped: false,
+        }));
+    }
+    let log_path = crate::coverage::log_path(path);
+    if !log_path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(Some(
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?,
-    ))
+    let text = std::fs::read_to_string(&log_path)
+        .with_context(|| format!("reading {}", log_path.display()))?;
+    let log = bamudi_gate::coverage::ReplicateLog::parse(&text, &log_path.display().to_string())?;
+    let options = log
+        .options
+        .clone()
+        .with_context(|| format!("{}: no options line", log_path.display()))?;
+    // an empty report carries the log's options into the merge, which summarises the log
+    let empty = CoverageReport {
+        options,
+        n_dofs: 0,
+        element_size: 0.0,
+        scenarios: vec![],
+        total_s: 0.0,
+        merged_from: 0,
+    };
+    Ok(Some(Read {
+        report: CoverageReport::merge(&[empty], vec![log])?,
+        stopped: true,
+    }))
+}
+
+/// A part's name in a table, marked when its study was stopped before it finished.
+fn label(name: &str, r: &Read) -> String {
+    if r.stopped {
+        format!("{name} (stopped: its log)")
+    } else {
+        name.to_string()
+    }
 }
 
 /// The level cell: rate and whether it lies in its acceptance region.
@@ -209,15 +262,16 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
         "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd |\n|---|---|---|---|---|---|---|\n",
     );
     for part in all.iter().filter(|p| p.group == "sbc") {
-        let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
+        let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
             md.push_str(&format!("| {} | not run | | | | | |\n", part.name));
             continue;
         };
-        for s in &r.scenarios {
+        let name = label(&part.name, &read);
+        for s in &read.report.scenarios {
             for q in s.ranked.iter().flatten() {
                 md.push_str(&format!(
                     "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} |\n",
-                    part.name,
+                    name,
                     s.name,
                     q.n,
                     level(s, 0.5),
@@ -242,19 +296,24 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
         md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
         md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for part in all.iter().filter(|p| p.group == group) {
-            let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
+            let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
                 md.push_str(&format!(
                     "| {} | not run | | | | | | | | | | | |\n",
                     part.name
                 ));
                 continue;
             };
-            for s in &r.scenarios {
+            let short = part
+                .name
+                .trim_start_matches("panel-")
+                .trim_start_matches("paper-size-");
+            let name = label(short, &read);
+            for s in &read.report.scenarios {
                 let c: Option<&CorrectionSummary> = s.correction.as_ref();
                 let cell = |f: &dyn Fn(&CorrectionSummary) -> String| c.map_or("–".into(), f);
                 md.push_str(&format!(
                     "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                    part.name.trim_start_matches("panel-").trim_start_matches("paper-size-"),
+                    name,
                     s.name,
                     s.n_replicates,
                     level(s, 0.5),
