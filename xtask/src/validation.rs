@@ -196,10 +196,10 @@ struct Read {
 
 fn read(path: &Path) -> Result<Option<Read>> {
     if path.exists() {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let report = serde_json::from_str(&text)
-            .with_context(|| format!("parsing {}", path.display()))?;
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let report =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
         return Ok(Some(Read {
             report,
             stopped: false,
@@ -251,6 +251,60 @@ fn level(s: &ScenarioCoverage, nominal: f64) -> String {
         })
 }
 
+/// An SBC row against issue 57's bounds: χ² p ≥ 0.01; |mean z| ≤ 0.15 and sd in [0.9, 1.1]
+/// with the hyper-parameters held, ≤ 0.25 and [0.8, 1.2] when they are estimated.
+fn sbc_verdict(q: &bamudi_gate::coverage::RankSummary, held: bool) -> String {
+    let (m_max, sd_lo, sd_hi) = if held {
+        (0.15, 0.9, 1.1)
+    } else {
+        (0.25, 0.8, 1.2)
+    };
+    let mut fails = Vec::new();
+    if q.uniformity_p < 0.01 {
+        fails.push(format!("p {:.3} < 0.01", q.uniformity_p));
+    }
+    if let Some([m, sd]) = q.z_mean_sd {
+        if m.abs() > m_max {
+            fails.push(format!("|mean z| > {m_max}"));
+        }
+        if !(sd_lo..=sd_hi).contains(&sd) {
+            fails.push(format!("z sd outside [{sd_lo}, {sd_hi}]"));
+        }
+    }
+    if fails.is_empty() {
+        "within".into()
+    } else {
+        format!("**outside**: {}", fails.join("; "))
+    }
+}
+
+/// A panel row's θ against issue 57's bounds: every level's coverage in its acceptance
+/// region, |mean z| ≤ 0.5, z sd in [0.75, 1.25]; an sd below says the interval is wider than
+/// the fixed discrepancy needs (cautious), above that it is too narrow (overconfident).
+fn panel_verdict(s: &ScenarioCoverage) -> String {
+    let mut fails = Vec::new();
+    for l in &s.theta_levels {
+        if !(l.acceptance.0..=l.acceptance.1).contains(&l.hits) {
+            let way = if l.rate > l.level { "wide" } else { "narrow" };
+            fails.push(format!("{:.0} % {way}", 100.0 * l.level));
+        }
+    }
+    let [m, sd] = s.z_mean_sd;
+    if m.abs() > 0.5 {
+        fails.push(format!("mean z {m:+.2}"));
+    }
+    if sd < 0.75 {
+        fails.push(format!("z sd {sd:.2} (cautious)"));
+    } else if sd > 1.25 {
+        fails.push(format!("z sd {sd:.2} (overconfident)"));
+    }
+    if fails.is_empty() {
+        "within".into()
+    } else {
+        format!("**outside**: {}", fails.join(", "))
+    }
+}
+
 fn nt(v: bamudi_gate::baselines::NormalTangential, p: usize) -> String {
     format!("{:.*} / {:.*}", p, v.normal, p, v.tangential)
 }
@@ -259,18 +313,19 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
     let mut md = String::from(include_str!("validation_head.md"));
     md.push_str("\n## Part 1: self-consistency (SBC)\n\n");
     md.push_str(
-        "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd |\n|---|---|---|---|---|---|---|\n",
+        "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd | against the bounds |\n|---|---|---|---|---|---|---|---|\n",
     );
     for part in all.iter().filter(|p| p.group == "sbc") {
         let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
-            md.push_str(&format!("| {} | not run | | | | | |\n", part.name));
+            md.push_str(&format!("| {} | not run | | | | | | |\n", part.name));
             continue;
         };
         let name = label(&part.name, &read);
+        let held = read.report.options.sbc.is_some_and(|o| o.hold);
         for s in &read.report.scenarios {
             for q in s.ranked.iter().flatten() {
                 md.push_str(&format!(
-                    "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} |\n",
+                    "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} | {} |\n",
                     name,
                     s.name,
                     q.n,
@@ -281,6 +336,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                     q.uniformity_p,
                     q.z_mean_sd
                         .map_or("–".into(), |[m, sd]| format!("{m:+.2} / {sd:.2}")),
+                    sbc_verdict(q, held),
                 ));
             }
         }
@@ -294,11 +350,11 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
     ] {
         md.push_str(&format!("\n## {title}\n\n"));
         md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
-        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % | θ against the bounds |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for part in all.iter().filter(|p| p.group == group) {
             let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
                 md.push_str(&format!(
-                    "| {} | not run | | | | | | | | | | | |\n",
+                    "| {} | not run | | | | | | | | | | | | |\n",
                     part.name
                 ));
                 continue;
@@ -312,7 +368,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                 let c: Option<&CorrectionSummary> = s.correction.as_ref();
                 let cell = |f: &dyn Fn(&CorrectionSummary) -> String| c.map_or("–".into(), f);
                 md.push_str(&format!(
-                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                     name,
                     s.name,
                     s.n_replicates,
@@ -339,6 +395,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                         .rho_projection
                         .as_ref()
                         .map_or("–".into(), |r| format!("{:.2}", r.coverage_95.rate))),
+                    panel_verdict(s),
                 ));
             }
         }

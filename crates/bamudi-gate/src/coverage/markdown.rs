@@ -194,8 +194,8 @@ fn ranks_section(scenarios: &[ScenarioCoverage]) -> String {
          (posterior mean − truth)/posterior sd (0 / 1 when calibrated). ρ is the split's ρ \
          (the data's own ρ only when δ is drawn from the prior); the force is the normal force \
          at location A (a quarter of the quoin height) at the first new condition, ranked \
-         among 1,000 joint posterior draws; the damage is the quoin block's at the truth's hot \
-         spot there.\n\n\
+         among 1,000 joint posterior draws; the damage is the quoin block's largest along the \
+         quoin there (each draw's hot spot against the truth's).\n\n\
          | scenario | mode | quantity | R | p | z mean / sd | histogram |\n|---|---|---|---|---|---|---|\n{rows}"
     )
 }

@@ -292,8 +292,11 @@ pub struct Ranks {
     /// The normal force at location A (a quarter of the quoin height) at the first new
     /// condition: the fraction of joint posterior draws below the truth.
     pub force: f64,
-    /// The quoin-block damage rate at the truth's hot spot (its most damaged point) at the
-    /// first new condition: the fraction of draws below the truth (`None` without damage).
+    /// The largest quoin-block damage rate along the quoin (the hot spot's, wherever each
+    /// draw puts it) at the first new condition: the fraction of draws below the truth's
+    /// (`None` when the truth has no damage there). A fixed function of the parameters, as
+    /// SBC needs: the damage at the *truth's* hot spot would pick its point from the truth and
+    /// rank the truth high by construction.
     pub damage: Option<f64>,
     /// `(mean − truth)/sd` of the force at location A over the draws.
     pub force_z: f64,
@@ -932,20 +935,20 @@ impl Setup<'_> {
         let nu = gate.n_points();
         let mut damage_truth = vec![0.0; 4 * nu];
         block.evaluate(&x, &[0.0], &truth_f, &mut damage_truth)?;
-        let hot = (3 * nu..4 * nu).max_by(|&i, &j| damage_truth[i].total_cmp(&damage_truth[j]));
-        let damage = match hot.filter(|&h| damage_truth[h] > 0.0) {
-            None => None,
-            Some(h) => {
+        let largest = |d: &[f64]| d[3 * nu..4 * nu].iter().copied().fold(0.0, f64::max);
+        let damage = match largest(&damage_truth) {
+            t if t > 0.0 => {
                 let mut out = vec![0.0; 4 * nu];
                 let values = draws
                     .iter()
                     .map(|d| {
                         block.evaluate(&x, &d.theta, &d.response, &mut out)?;
-                        Ok(out[h])
+                        Ok(largest(&out))
                     })
                     .collect::<Result<Vec<_>>>()?;
-                Some(below(&values, damage_truth[h]))
+                Some(below(&values, t))
             }
+            _ => None,
         };
         Ok(Ranks {
             rho,
