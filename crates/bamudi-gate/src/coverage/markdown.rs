@@ -115,6 +115,13 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
             let rho = c.rho_projection.as_ref().map_or("–".into(), |r| {
                 format!("{} z {:+.2} (rms {:.2})", level_cell(&r.coverage_95), r.z_mean, r.z_rms)
             });
+            let delta = format!(
+                "{:.2} / {:.2} (floor {:.2} / {:.2})",
+                c.delta_ratio.normal,
+                c.delta_ratio.tangential,
+                c.delta_floor_ratio.normal,
+                c.delta_floor_ratio.tangential
+            );
             Some(format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:+.2} / {:.2} | {} |\n",
                 s.name,
@@ -128,13 +135,7 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
                 nt(b.oracle_seen_posterior, 1),
                 nt(c.vs_no_discrepancy, 2),
                 nt(c.vs_oracle_seen, 2),
-                format!(
-                    "{:.2} / {:.2} (floor {:.2} / {:.2})",
-                    c.delta_ratio.normal,
-                    c.delta_ratio.tangential,
-                    c.delta_floor_ratio.normal,
-                    c.delta_floor_ratio.tangential
-                ),
+                delta,
                 nt(c.halfwidth_over_delta, 2),
                 s.z_mean_sd[0],
                 s.z_mean_sd[1],

@@ -270,7 +270,7 @@ mod tests {
         );
         let saved: CoverageReport =
             serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
-        let mut current = CoverageReport::merge(&[saved.clone()], vec![]).unwrap();
+        let mut current = CoverageReport::merge(std::slice::from_ref(&saved), vec![]).unwrap();
         current.merged_from = saved.merged_from;
         current
     }

@@ -433,6 +433,9 @@ pub struct RankSummary {
     pub z_mean_sd: Option<[f64; 2]>,
 }
 
+/// A ranked quantity's name, its PITs and its z's mean and sd.
+type RankColumn = (&'static str, Vec<f64>, Option<[f64; 2]>);
+
 /// [`RankSummary`] of each ranked quantity, if every replicate ranked them.
 fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
     let ranks: Option<Vec<Ranks>> = reps.iter().map(|r| r.ranks).collect();
@@ -459,7 +462,7 @@ fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
         .filter_map(|r| Some((r.rho - r.rho_true?) / r.rho_sd?))
         .collect();
     let force_z: Vec<f64> = ranks.iter().map(|r| r.force_z).collect();
-    let columns: [(&str, Vec<f64>, Option<[f64; 2]>); 4] = [
+    let columns: [RankColumn; 4] = [
         (
             "theta",
             reps.iter().map(|r| r.pit).collect(),
@@ -722,8 +725,7 @@ impl Setup<'_> {
                 let drawn = DrawnDelta::draw(
                     &self.model,
                     self.contact,
-                    theta,
-                    0.5 * (lo + hi),
+                    (theta, 0.5 * (lo + hi)),
                     &levels,
                     &inputs,
                     &sbc.hyper,
