@@ -337,7 +337,7 @@ def test_the_documented_example_runs_as_printed(tmp_path):
     assert len(src.splitlines()) < 40
     out = subprocess.run([sys.executable, str(REPO / "python" / "examples" / "own_model.py")], cwd=tmp_path,
                          capture_output=True, text=True, check=True).stdout
-    assert "decay 1.654 1/m, 95 % [1.585, 1.725] (truth 1.6)" in out, out
+    assert "decay 1.655 1/m, 95 % [1.584, 1.728] (truth 1.6)" in out, out
     assert (tmp_path / "own_model_calibration" / "model.json").is_file()
 
 

@@ -218,7 +218,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O
                 c.push(y - b[(i, q)]);
             }
         }
-        let without = no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range).log_lik;
+        let without =
+            no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range, self.p.cfg.sigma_eps)
+                .log_lik;
         Ok((with, without))
     }
 
