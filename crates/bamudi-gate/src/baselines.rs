@@ -231,20 +231,10 @@ impl ErrorTally {
     /// Adds every point of one condition (`n_u` points per component, blocked), with the
     /// seen-subspace oracle `seen`.
     pub fn add_condition(&mut self, f: &ConditionForces<'_>, seen: &SeenSubspace, n_u: usize) {
-        let delta: Vec<f64> = f
-            .truth
-            .iter()
-            .zip(f.model_part)
-            .map(|(t, m)| t - m)
-            .collect();
+        let minus = |m: &[f64]| -> Vec<f64> { f.truth.iter().zip(m).map(|(t, m)| t - m).collect() };
+        let delta = minus(f.model_part);
         let delta_seen = seen.seen(&delta);
-        let residual: Vec<f64> = f
-            .truth
-            .iter()
-            .zip(f.model_part_posterior)
-            .map(|(t, m)| t - m)
-            .collect();
-        let correction = seen.seen(&residual);
+        let correction = seen.seen(&minus(f.model_part_posterior));
         for p in 0..f.truth.len() {
             let t = f.truth[p];
             self.add(

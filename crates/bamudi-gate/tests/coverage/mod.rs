@@ -35,6 +35,18 @@ const ALPHA: f64 = 0.01;
 /// The central level of a Gaussian interval half as wide as the 95 % one: 2Φ(1.96/2) − 1.
 const HALF_WIDTH_LEVEL: f64 = 0.6729;
 
+/// The 95 % intervals' hit count lies in the acceptance region.
+fn assert_in_region(s: &ScenarioCoverage, c95: &Coverage, region: (usize, usize)) {
+    assert!(
+        (region.0..=region.1).contains(&c95.hits),
+        "{}: 95 % intervals hold θ* {}/{} times, outside the acceptance region {:?}",
+        s.name,
+        c95.hits,
+        c95.n,
+        region
+    );
+}
+
 fn hits(s: &ScenarioCoverage, level: f64) -> Coverage {
     let pits: Vec<f64> = s.replicates.iter().map(|r| r.pit).collect();
     Coverage::from_pits(&pits, level)
@@ -82,14 +94,7 @@ fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
             s.name,
             s.theta_sd_median
         );
-        assert!(
-            (region.0..=region.1).contains(&c95.hits),
-            "{}: 95 % intervals hold θ* {}/{} times, outside the acceptance region {:?}",
-            s.name,
-            c95.hits,
-            c95.n,
-            region
-        );
+        assert_in_region(s, &c95, region);
         // The force bands: at least 0.90 of the condition × point pairs (the bound) in
         // the normal force.
         assert!(
@@ -139,14 +144,7 @@ fn sbc_with_the_discrepancy_drawn_from_the_prior_has_uniform_ranks() {
             s.z_mean_sd[0],
             s.z_mean_sd[1]
         );
-        assert!(
-            (region.0..=region.1).contains(&c95.hits),
-            "{}: 95 % intervals hold θ* {}/{} times, outside {:?}",
-            s.name,
-            c95.hits,
-            c95.n,
-            region
-        );
+        assert_in_region(s, &c95, region);
         assert!(
             s.sbc_uniformity_p >= ALPHA,
             "{}: SBC rank histogram rejects uniformity (p {:.4})",
