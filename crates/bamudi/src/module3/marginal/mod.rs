@@ -572,7 +572,10 @@ where
             log_det: lik.cov.log_det()?,
             jitter: 0.0,
         },
-        no_discrepancy: Some(NoDiscrepancyFit::new(p, &post_without)?),
+        no_discrepancy: match p.cfg.no_discrepancy_fit {
+            true => Some(NoDiscrepancyFit::new(p, &post_without)?),
+            false => None,
+        },
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: Some(MarginalFit {
