@@ -216,9 +216,10 @@ impl Default for EstimatorParams {
     /// engine's observable level is linear in the response
     /// ([`mlmodel::LinearObservableModel`]), so the estimator of Eq. 29 has a closed form that
     /// the learnt estimators approximate, and it needs no training set. The default
-    /// (marginal) mode's Module 3 does not read the estimator's coefficients at all; the
-    /// paper's LSTM ([`EstimatorParams::lstm`]) is for the paper's and the conditional modes
-    /// as published (`cargo xtask reproduce-paper` sets it).
+    /// (marginal) mode's Module 3 reads the estimator's coefficients only to start its noise
+    /// search, when neither `sigma_eps` nor `sampling.noise_sd` is given; the paper's LSTM
+    /// ([`EstimatorParams::lstm`]) is for the paper's and the conditional modes as published
+    /// (`cargo xtask reproduce-paper` sets it).
     ///
     /// ```
     /// assert_eq!(bamudi::EstimatorParams::default(), bamudi::EstimatorParams::ExactLinear);
