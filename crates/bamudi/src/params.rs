@@ -233,6 +233,11 @@ impl EstimatorParams {
     /// The LSTM with 64 hidden units in one layer, 10 scalar steps, at most 200 epochs of
     /// batches of 256 with Adam at 1e-3, early stopping after 20 epochs without improvement
     /// on a 10 % validation split: the paper's architecture with a generous training budget.
+    ///
+    /// ```
+    /// let bamudi::EstimatorParams::Lstm(s) = bamudi::EstimatorParams::lstm() else { panic!() };
+    /// assert_eq!((s.hidden, s.layers, s.steps, s.epochs, s.patience), (64, 1, 10, 200, 20));
+    /// ```
     pub fn lstm() -> Self {
         Self::Lstm(seqnet::LstmSettings {
             hidden: 64,
