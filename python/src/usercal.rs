@@ -455,8 +455,10 @@ impl ModelCalibration {
         d.set_item("cdf", g.cdf.clone().into_pyarray(py))?;
         Ok(Some(d))
     }
-    /// The posterior without discrepancy (`ρ = 1`, `δ = 0`; Fig. 16): `(mean, sd, ci95)` per
-    /// dimension.
+    /// The posterior without discrepancy (`δ = 0`, `ρ` integrated over its prior range, the
+    /// noise sd fitted at each θ unless the configuration states `sigma_eps`; Fig. 16):
+    /// `(mean, sd, ci95)` per dimension. For a peer's `reality = model + noise`, give `ρ` the
+    /// range `[0.99999, 1.00001]`.
     fn no_discrepancy_summary(&self) -> Vec<(f64, f64, (f64, f64))> {
         let p = &self.cal.module3().posterior_no_discrepancy;
         let (m, s, c) = (p.mean(), p.sd(), p.ci95());

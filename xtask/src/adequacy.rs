@@ -50,7 +50,7 @@ pub struct AdequacyArgs {
     out: PathBuf,
     /// Marginal mode: prior variance of each coefficient function's unknown level, relative
     /// to the process variance (written to every run's `cal.toml` as
-    /// `[calibration.marginal] level_variance`; unset, the library's default, 1e3).
+    /// `[calibration.marginal] level_variance`; unset, the library's default, 0).
     #[arg(long)]
     level_variance: Option<f64>,
     /// Narrows `ρ`'s prior and the Module-2 sampling rule's `ρ` range to `LO,HI` (written to

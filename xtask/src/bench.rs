@@ -6,7 +6,9 @@
 //! criterion median from `target/criterion`, runs each anchor script whose Python packages are
 //! installed (a missing package is reported in the table, not an error), and replaces the
 //! section between [`BEGIN`] and [`END`] of the output document (appended when absent; the file
-//! is written atomically). With `--profile` it also records where `reproduce-paper --quick`
+//! is written atomically). The anchors include one whole calibration run through a peer
+//! ([`PEER_SCRIPT`]: SEPIA's ball drop through surmise and through our Python package, same
+//! likelihood), whose posteriors are tabulated beside the wall times. With `--profile` it also records where `reproduce-paper --quick`
 //! spends its time (`perf record`, inclusive share per function of our crates) when `perf` is
 //! installed.
 
@@ -57,6 +59,10 @@ pub enum Anchor {
     Skipped(String),
 }
 
+/// The whole-calibration comparison with a peer (run with `--python`, which needs the `bamudi`
+/// package and surmise installed; skipped with the reason otherwise).
+pub const PEER_SCRIPT: &str = "python/examples/benchmarks/peer_anchor.py";
+
 /// Runs the task.
 pub fn run(args: &BenchArgs) -> Result<()> {
     let started = std::time::Instant::now();
@@ -65,7 +71,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let medians = criterion_medians(Path::new("target/criterion"), run_began)?;
     let anchors = match args.no_anchors {
         true => BTreeMap::new(),
-        false => run_anchors(&args.python, &args.anchors),
+        false => {
+            let mut a = run_anchors(&args.python, &args.anchors);
+            a.insert(
+                PEER_SCRIPT.into(),
+                run_anchor(&args.python, Path::new(PEER_SCRIPT)),
+            );
+            a
+        }
     };
     let profile = match (args.profile, args.profile_paper) {
         (_, true) => Some(profile_reproduction(ProfiledRun::Paper)),
@@ -277,6 +290,7 @@ fn render(
         elapsed.as_secs()
     );
     s += &peer_table(medians, anchors);
+    s += &whole_calibration_table(anchors);
     s += &target_table(medians);
     s += &all_medians_table(medians);
     if let Some(p) = profile {
@@ -322,6 +336,36 @@ fn peer_table(medians: &BTreeMap<String, f64>, anchors: &BTreeMap<String, Anchor
         );
     }
     s + "\n"
+}
+
+/// The whole calibration against a peer ([`PEER_SCRIPT`]): wall times and posteriors.
+fn whole_calibration_table(anchors: &BTreeMap<String, Anchor>) -> String {
+    let mut s = String::from(
+        "### A whole calibration against a peer\n\nSEPIA's ball drop without discrepancy \
+         (docs/results/peers.md): the same simulator, prior and known noise sd (0.01 s), i.e. the \
+         same likelihood, through surmise 1.0's `directbayes` (Metropolis-Hastings, 2000 + 1000 \
+         burn-in, the simulator passed through) and through our Python package (`bamudi.calibrate`, \
+         the grid posterior without discrepancy); medians of the script's runs.\n\n\
+         | calibration | C: mean ± sd | wall time |\n|---|---|---|\n",
+    );
+    let v = |k: &str| anchor_value(anchors, PEER_SCRIPT, k);
+    let row = |who: &str, side: &str| -> String {
+        match (
+            v(&format!("{side}_mean")),
+            v(&format!("{side}_sd")),
+            v(&format!("{side}_s")),
+        ) {
+            (Ok(m), Ok(sd), Ok(t)) => format!("| {who} | {m:.4} ± {sd:.4} | {} |\n", seconds(t)),
+            (Err(e), ..) | (_, Err(e), _) | (.., Err(e)) => format!("| {who} | {e} | — |\n"),
+        }
+    };
+    s += &row("surmise 1.0 `directbayes`", "peer");
+    s += &row("bamudi (Python package)", "ours");
+    s += &format!(
+        "| peer / ours | | {} |\n\n",
+        ratio(v("peer_s").ok(), v("ours_s").ok())
+    );
+    s
 }
 
 fn anchor_value(
@@ -520,6 +564,32 @@ fn profile_table(shares: &[(String, f64)], rows: usize) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_peer_table_shows_both_posteriors_and_the_ratio_or_why_not() {
+        let line = "anchor peer_s=14.0 ours_s=0.5 peer_mean=0.1422 peer_sd=0.0005 ours_mean=0.1421 ours_sd=0.0006 runs=3";
+        let ran = BTreeMap::from([(
+            PEER_SCRIPT.to_string(),
+            Anchor::Ran(parse_anchor_line(line).unwrap()),
+        )]);
+        let t = whole_calibration_table(&ran);
+        assert!(
+            t.contains("| surmise 1.0 `directbayes` | 0.1422 ± 0.0005 | 14.00 s |"),
+            "{t}"
+        );
+        assert!(
+            t.contains("| bamudi (Python package) | 0.1421 ± 0.0006 | 500.00 ms |"),
+            "{t}"
+        );
+        assert!(t.contains("| peer / ours | | 28.00x |"), "{t}");
+        let skipped = BTreeMap::from([(
+            PEER_SCRIPT.to_string(),
+            Anchor::Skipped("No module named 'surmise'".into()),
+        )]);
+        let t = whole_calibration_table(&skipped);
+        assert!(t.contains("not run: No module named 'surmise'"), "{t}");
+        assert!(t.contains("| peer / ours | | — |"), "{t}");
+    }
 
     #[test]
     fn anchor_lines_are_parsed_and_other_lines_ignored() {

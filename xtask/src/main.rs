@@ -104,7 +104,7 @@ struct ReproduceArgs {
     #[arg(long)]
     sensitivity: bool,
     /// The marginal mode's level variance of the discrepancy coefficient functions
-    /// (`MarginalPrior::level_variance`; default the library's, 1e3).
+    /// (`MarginalPrior::level_variance`; default the library's, 0).
     #[arg(long)]
     level_variance: Option<f64>,
 }

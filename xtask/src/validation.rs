@@ -12,7 +12,8 @@
 //!
 //! Every part is one coverage study (`bamudi_gate::coverage`) written to
 //! `<out>/<part>.json` as it finishes (with the running log `<part>.json.partial.jsonl`
-//! meanwhile): a stopped run resumes by skipping the parts already written. `--render` (also
+//! meanwhile): a stopped run resumes by skipping the parts already written, and a part stopped
+//! midway is read from its log (marked so) until its log is moved away. `--render` (also
 //! run after the parts) writes `<out>/../validation.md` from whatever parts exist.
 
 use anyhow::{Context, Result, bail};
@@ -160,6 +161,16 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
             eprintln!("{}: {} exists, skipped", part.name, json.display());
             continue;
         }
+        let log = crate::coverage::log_path(&json);
+        if log.exists() {
+            eprintln!(
+                "{}: {} holds a stopped run, skipped (the tables read it; move it away to run \
+                 the part again)",
+                part.name,
+                log.display()
+            );
+            continue;
+        }
         eprintln!("{}: running", part.name);
         let report = crate::coverage::study(&part.opts, Some(&json))?;
         bamudi::data::write_atomic(&json, report.to_json()?.as_bytes())?;
@@ -176,15 +187,57 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
     Ok(())
 }
 
-fn read(path: &Path) -> Result<Option<CoverageReport>> {
-    if !path.exists() {
+/// A part's report, or, for a part stopped before it finished, the replicates its running
+/// log holds (`stopped` set: the table says so, and its R column is what was run).
+struct Read {
+    report: CoverageReport,
+    stopped: bool,
+}
+
+fn read(path: &Path) -> Result<Option<Read>> {
+    if path.exists() {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let report =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        return Ok(Some(Read {
+            report,
+            stopped: false,
+        }));
+    }
+    let log_path = crate::coverage::log_path(path);
+    if !log_path.exists() {
         return Ok(None);
     }
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(Some(
-        serde_json::from_str(&text).with_context(|| format!("parsing {}", path.display()))?,
-    ))
+    let text = std::fs::read_to_string(&log_path)
+        .with_context(|| format!("reading {}", log_path.display()))?;
+    let log = bamudi_gate::coverage::ReplicateLog::parse(&text, &log_path.display().to_string())?;
+    let options = log
+        .options
+        .clone()
+        .with_context(|| format!("{}: no options line", log_path.display()))?;
+    // an empty report carries the log's options into the merge, which summarises the log
+    let empty = CoverageReport {
+        options,
+        n_dofs: 0,
+        element_size: 0.0,
+        scenarios: vec![],
+        total_s: 0.0,
+        merged_from: 0,
+    };
+    Ok(Some(Read {
+        report: CoverageReport::merge(&[empty], vec![log])?,
+        stopped: true,
+    }))
+}
+
+/// A part's name in a table, marked when its study was stopped before it finished.
+fn label(name: &str, r: &Read) -> String {
+    if r.stopped {
+        format!("{name} (stopped: its log)")
+    } else {
+        name.to_string()
+    }
 }
 
 /// The level cell: rate and whether it lies in its acceptance region.
@@ -198,6 +251,60 @@ fn level(s: &ScenarioCoverage, nominal: f64) -> String {
         })
 }
 
+/// An SBC row against issue 57's bounds: χ² p ≥ 0.01; |mean z| ≤ 0.15 and sd in [0.9, 1.1]
+/// with the hyper-parameters held, ≤ 0.25 and [0.8, 1.2] when they are estimated.
+fn sbc_verdict(q: &bamudi_gate::coverage::RankSummary, held: bool) -> String {
+    let (m_max, sd_lo, sd_hi) = if held {
+        (0.15, 0.9, 1.1)
+    } else {
+        (0.25, 0.8, 1.2)
+    };
+    let mut fails = Vec::new();
+    if q.uniformity_p < 0.01 {
+        fails.push(format!("p {:.3} < 0.01", q.uniformity_p));
+    }
+    if let Some([m, sd]) = q.z_mean_sd {
+        if m.abs() > m_max {
+            fails.push(format!("|mean z| > {m_max}"));
+        }
+        if !(sd_lo..=sd_hi).contains(&sd) {
+            fails.push(format!("z sd outside [{sd_lo}, {sd_hi}]"));
+        }
+    }
+    if fails.is_empty() {
+        "within".into()
+    } else {
+        format!("**outside**: {}", fails.join("; "))
+    }
+}
+
+/// A panel row's θ against issue 57's bounds: every level's coverage in its acceptance
+/// region, |mean z| ≤ 0.5, z sd in [0.75, 1.25]; an sd below says the interval is wider than
+/// the fixed discrepancy needs (cautious), above that it is too narrow (overconfident).
+fn panel_verdict(s: &ScenarioCoverage) -> String {
+    let mut fails = Vec::new();
+    for l in &s.theta_levels {
+        if !(l.acceptance.0..=l.acceptance.1).contains(&l.hits) {
+            let way = if l.rate > l.level { "wide" } else { "narrow" };
+            fails.push(format!("{:.0} % {way}", 100.0 * l.level));
+        }
+    }
+    let [m, sd] = s.z_mean_sd;
+    if m.abs() > 0.5 {
+        fails.push(format!("mean z {m:+.2}"));
+    }
+    if sd < 0.75 {
+        fails.push(format!("z sd {sd:.2} (cautious)"));
+    } else if sd > 1.25 {
+        fails.push(format!("z sd {sd:.2} (overconfident)"));
+    }
+    if fails.is_empty() {
+        "within".into()
+    } else {
+        format!("**outside**: {}", fails.join(", "))
+    }
+}
+
 fn nt(v: bamudi_gate::baselines::NormalTangential, p: usize) -> String {
     format!("{:.*} / {:.*}", p, v.normal, p, v.tangential)
 }
@@ -206,18 +313,20 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
     let mut md = String::from(include_str!("validation_head.md"));
     md.push_str("\n## Part 1: self-consistency (SBC)\n\n");
     md.push_str(
-        "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd |\n|---|---|---|---|---|---|---|\n",
+        "| part | scenario | R | θ 50 / 90 / 95 % | quantity | χ² p | z mean / sd | against the bounds |\n|---|---|---|---|---|---|---|---|\n",
     );
     for part in all.iter().filter(|p| p.group == "sbc") {
-        let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
-            md.push_str(&format!("| {} | not run | | | | | |\n", part.name));
+        let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
+            md.push_str(&format!("| {} | not run | | | | | | |\n", part.name));
             continue;
         };
-        for s in &r.scenarios {
+        let name = label(&part.name, &read);
+        let held = read.report.options.sbc.is_some_and(|o| o.hold);
+        for s in &read.report.scenarios {
             for q in s.ranked.iter().flatten() {
                 md.push_str(&format!(
-                    "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} |\n",
-                    part.name,
+                    "| {} | {} | {} | {} / {} / {} | {} | {:.3} | {} | {} |\n",
+                    name,
                     s.name,
                     q.n,
                     level(s, 0.5),
@@ -227,6 +336,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                     q.uniformity_p,
                     q.z_mean_sd
                         .map_or("–".into(), |[m, sd]| format!("{m:+.2} / {sd:.2}")),
+                    sbc_verdict(q, held),
                 ));
             }
         }
@@ -240,21 +350,26 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
     ] {
         md.push_str(&format!("\n## {title}\n\n"));
         md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
-        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % | θ against the bounds |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for part in all.iter().filter(|p| p.group == group) {
-            let Some(r) = read(&out.join(format!("{}.json", part.name)))? else {
+            let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
                 md.push_str(&format!(
-                    "| {} | not run | | | | | | | | | | | |\n",
+                    "| {} | not run | | | | | | | | | | | | |\n",
                     part.name
                 ));
                 continue;
             };
-            for s in &r.scenarios {
+            let short = part
+                .name
+                .trim_start_matches("panel-")
+                .trim_start_matches("paper-size-");
+            let name = label(short, &read);
+            for s in &read.report.scenarios {
                 let c: Option<&CorrectionSummary> = s.correction.as_ref();
                 let cell = |f: &dyn Fn(&CorrectionSummary) -> String| c.map_or("–".into(), f);
                 md.push_str(&format!(
-                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
-                    part.name.trim_start_matches("panel-").trim_start_matches("paper-size-"),
+                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    name,
                     s.name,
                     s.n_replicates,
                     level(s, 0.5),
@@ -280,6 +395,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                         .rho_projection
                         .as_ref()
                         .map_or("–".into(), |r| format!("{:.2}", r.coverage_95.rate))),
+                    panel_verdict(s),
                 ));
             }
         }

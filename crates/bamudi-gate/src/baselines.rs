@@ -34,13 +34,21 @@ use mitergate::{ContactModel, GateMultiLevel};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-/// Normal and tangential values.
+/// Normal and tangential values. A ratio over a zero truth (no true discrepancy) is not a
+/// number; JSON writes it as `null` and reads `null` back as NaN.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct NormalTangential {
     /// Normal force.
+    #[serde(deserialize_with = "nan_if_null")]
     pub normal: f64,
     /// Tangential force.
+    #[serde(deserialize_with = "nan_if_null")]
     pub tangential: f64,
+}
+
+/// `null` (how JSON writes a NaN or an infinity) as NaN.
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// Force RMSE (lbf/in) of every baseline and oracle (see the module docs).
@@ -223,20 +231,10 @@ impl ErrorTally {
     /// Adds every point of one condition (`n_u` points per component, blocked), with the
     /// seen-subspace oracle `seen`.
     pub fn add_condition(&mut self, f: &ConditionForces<'_>, seen: &SeenSubspace, n_u: usize) {
-        let delta: Vec<f64> = f
-            .truth
-            .iter()
-            .zip(f.model_part)
-            .map(|(t, m)| t - m)
-            .collect();
+        let minus = |m: &[f64]| -> Vec<f64> { f.truth.iter().zip(m).map(|(t, m)| t - m).collect() };
+        let delta = minus(f.model_part);
         let delta_seen = seen.seen(&delta);
-        let residual: Vec<f64> = f
-            .truth
-            .iter()
-            .zip(f.model_part_posterior)
-            .map(|(t, m)| t - m)
-            .collect();
-        let correction = seen.seen(&residual);
+        let correction = seen.seen(&minus(f.model_part_posterior));
         for p in 0..f.truth.len() {
             let t = f.truth[p];
             self.add(

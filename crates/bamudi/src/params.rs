@@ -212,10 +212,33 @@ pub struct RidgeParams {
 }
 
 impl Default for EstimatorParams {
+    /// The exact linear-Gaussian conditional mean ([`EstimatorParams::ExactLinear`]): the
+    /// engine's observable level is linear in the response
+    /// ([`mlmodel::LinearObservableModel`]), so the estimator of Eq. 29 has a closed form that
+    /// the learnt estimators approximate, and it needs no training set. The default
+    /// (marginal) mode's Module 3 reads the estimator's coefficients only to start its noise
+    /// search, when neither `sigma_eps` nor `sampling.noise_sd` is given; the paper's LSTM
+    /// ([`EstimatorParams::lstm`]) is for the paper's and the conditional modes as published
+    /// (`cargo xtask reproduce-paper` sets it).
+    ///
+    /// ```
+    /// assert_eq!(bamudi::EstimatorParams::default(), bamudi::EstimatorParams::ExactLinear);
+    /// ```
+    fn default() -> Self {
+        Self::ExactLinear
+    }
+}
+
+impl EstimatorParams {
     /// The LSTM with 64 hidden units in one layer, 10 scalar steps, at most 200 epochs of
     /// batches of 256 with Adam at 1e-3, early stopping after 20 epochs without improvement
-    /// on a 10 % validation split.
-    fn default() -> Self {
+    /// on a 10 % validation split: the paper's architecture with a generous training budget.
+    ///
+    /// ```
+    /// let bamudi::EstimatorParams::Lstm(s) = bamudi::EstimatorParams::lstm() else { panic!() };
+    /// assert_eq!((s.hidden, s.layers, s.steps, s.epochs, s.patience), (64, 1, 10, 200, 20));
+    /// ```
+    pub fn lstm() -> Self {
         Self::Lstm(seqnet::LstmSettings {
             hidden: 64,
             layers: 1,
@@ -228,9 +251,7 @@ impl Default for EstimatorParams {
             ..seqnet::LstmSettings::default()
         })
     }
-}
 
-impl EstimatorParams {
     /// Short name for reports (`lstm`, `ridge`, `exact_linear`).
     pub fn name(&self) -> &'static str {
         match self {
@@ -497,6 +518,13 @@ pub struct CalibrationParams {
     pub marginal: MarginalPrior,
     /// The adequacy checks run after Module 3.
     pub adequacy: crate::adequacy::AdequacyParams,
+    /// Fit the strongest calibration without a discrepancy at its `θ` posterior's support
+    /// points ([`crate::module3::no_discrepancy::NoDiscrepancyFit`], "baseline (b)"), which
+    /// [`crate::Predictor::no_discrepancy_response`] predicts from (default `true`). It costs
+    /// the model at every support point of that posterior (up to 400 `θ`s, each at every
+    /// experiment); a caller that never predicts the baseline, such as a close loop, turns it
+    /// off. The posterior without discrepancy itself (Fig. 16) is computed either way.
+    pub no_discrepancy_fit: bool,
     /// Master seed; every random step derives its seed from it.
     pub seed: u64,
     /// Worker threads (`None`: rayon's default). The engine does not start threads of its own;
@@ -519,6 +547,7 @@ impl Default for CalibrationParams {
             coefficients: CoefficientMode::Marginal,
             marginal: MarginalPrior::default(),
             adequacy: crate::adequacy::AdequacyParams::default(),
+            no_discrepancy_fit: true,
             seed: 2021,
             threads: None,
         }
@@ -585,6 +614,8 @@ impl CalibrationParams {
         coefficients: CoefficientMode, "bamudi::CoefficientMode::ConditionalOnTheta");
     setter!(/// Sets the coefficients' prior of the marginal mode.
         marginal: MarginalPrior, "bamudi::MarginalPrior { scales: bamudi::CoefficientScales::PerCoefficient, ..Default::default() }");
+    setter!(/// Sets whether the baseline without discrepancy is fitted at its support points.
+        no_discrepancy_fit: bool, "false");
     setter!(/// Sets the master seed.
         seed: u64, "42");
     setter!(/// Sets the thread count.

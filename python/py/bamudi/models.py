@@ -231,9 +231,9 @@ def calibrate_model(
     with ``columns`` — through the engine (``bamudi::Calibrate``, the gate's code). ``config``:
     a dict, TOML text or TOML file with the keys of the engine's ``CalibrationParams``
     (``estimator``, ``coefficients``, ``sampling``, ``theta_grid_points``, ``marginal``, ...;
-    ``None``: the engine's defaults, i.e. the marginal mode and the LSTM estimator; the linear
-    case is exact with ``{"estimator": {"kind": "exact_linear"}}``); ``seed`` replaces its
-    seed."""
+    ``None``: the engine's defaults, i.e. the marginal mode and the exact linear estimator (no
+    training set); the paper's LSTM with ``{"estimator": {"kind": "lstm"}}``); ``seed``
+    replaces its seed."""
     x, y = _experiments(model, data, columns)
     native = _native.calibrate_model(model._native, x, y, seed=seed, progress=progress, **_config(config))
     return ModelCalibration(native, model)

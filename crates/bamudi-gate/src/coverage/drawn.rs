@@ -47,8 +47,7 @@ impl DrawnDelta {
     pub fn draw(
         model: &GateMultiLevel,
         contact: &ContactModel,
-        theta_star: f64,
-        theta_bar: f64,
+        (theta_star, theta_bar): (f64, f64),
         experiments: &[[f64; 2]],
         inputs: &[[f64; 2]],
         hyper: &GeneratingHyper,

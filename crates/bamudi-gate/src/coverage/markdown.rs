@@ -115,6 +115,13 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
             let rho = c.rho_projection.as_ref().map_or("–".into(), |r| {
                 format!("{} z {:+.2} (rms {:.2})", level_cell(&r.coverage_95), r.z_mean, r.z_rms)
             });
+            let delta = format!(
+                "{:.2} / {:.2} (floor {:.2} / {:.2})",
+                c.delta_ratio.normal,
+                c.delta_ratio.tangential,
+                c.delta_floor_ratio.normal,
+                c.delta_floor_ratio.tangential
+            );
             Some(format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:+.2} / {:.2} | {} |\n",
                 s.name,
@@ -128,13 +135,7 @@ fn correction_section(scenarios: &[ScenarioCoverage]) -> String {
                 nt(b.oracle_seen_posterior, 1),
                 nt(c.vs_no_discrepancy, 2),
                 nt(c.vs_oracle_seen, 2),
-                format!(
-                    "{:.2} / {:.2} (floor {:.2} / {:.2})",
-                    c.delta_ratio.normal,
-                    c.delta_ratio.tangential,
-                    c.delta_floor_ratio.normal,
-                    c.delta_floor_ratio.tangential
-                ),
+                delta,
                 nt(c.halfwidth_over_delta, 2),
                 s.z_mean_sd[0],
                 s.z_mean_sd[1],
@@ -194,8 +195,8 @@ fn ranks_section(scenarios: &[ScenarioCoverage]) -> String {
          (posterior mean − truth)/posterior sd (0 / 1 when calibrated). ρ is the split's ρ \
          (the data's own ρ only when δ is drawn from the prior); the force is the normal force \
          at location A (a quarter of the quoin height) at the first new condition, ranked \
-         among 1,000 joint posterior draws; the damage is the quoin block's at the truth's hot \
-         spot there.\n\n\
+         among 1,000 joint posterior draws; the damage is the quoin block's largest along the \
+         quoin there (each draw's hot spot against the truth's).\n\n\
          | scenario | mode | quantity | R | p | z mean / sd | histogram |\n|---|---|---|---|---|---|---|\n{rows}"
     )
 }

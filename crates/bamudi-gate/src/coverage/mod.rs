@@ -292,8 +292,11 @@ pub struct Ranks {
     /// The normal force at location A (a quarter of the quoin height) at the first new
     /// condition: the fraction of joint posterior draws below the truth.
     pub force: f64,
-    /// The quoin-block damage rate at the truth's hot spot (its most damaged point) at the
-    /// first new condition: the fraction of draws below the truth (`None` without damage).
+    /// The largest quoin-block damage rate along the quoin (the hot spot's, wherever each
+    /// draw puts it) at the first new condition: the fraction of draws below the truth's
+    /// (`None` when the truth has no damage there). A fixed function of the parameters, as
+    /// SBC needs: the damage at the *truth's* hot spot would pick its point from the truth and
+    /// rank the truth high by construction.
     pub damage: Option<f64>,
     /// `(mean − truth)/sd` of the force at location A over the draws.
     pub force_z: f64,
@@ -430,6 +433,9 @@ pub struct RankSummary {
     pub z_mean_sd: Option<[f64; 2]>,
 }
 
+/// A ranked quantity's name, its PITs and its z's mean and sd.
+type RankColumn = (&'static str, Vec<f64>, Option<[f64; 2]>);
+
 /// [`RankSummary`] of each ranked quantity, if every replicate ranked them.
 fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
     let ranks: Option<Vec<Ranks>> = reps.iter().map(|r| r.ranks).collect();
@@ -456,7 +462,7 @@ fn rank_summaries(reps: &[Replicate]) -> Result<Option<Vec<RankSummary>>> {
         .filter_map(|r| Some((r.rho - r.rho_true?) / r.rho_sd?))
         .collect();
     let force_z: Vec<f64> = ranks.iter().map(|r| r.force_z).collect();
-    let columns: [(&str, Vec<f64>, Option<[f64; 2]>); 4] = [
+    let columns: [RankColumn; 4] = [
         (
             "theta",
             reps.iter().map(|r| r.pit).collect(),
@@ -719,8 +725,7 @@ impl Setup<'_> {
                 let drawn = DrawnDelta::draw(
                     &self.model,
                     self.contact,
-                    theta,
-                    0.5 * (lo + hi),
+                    (theta, 0.5 * (lo + hi)),
                     &levels,
                     &inputs,
                     &sbc.hyper,
@@ -932,20 +937,20 @@ impl Setup<'_> {
         let nu = gate.n_points();
         let mut damage_truth = vec![0.0; 4 * nu];
         block.evaluate(&x, &[0.0], &truth_f, &mut damage_truth)?;
-        let hot = (3 * nu..4 * nu).max_by(|&i, &j| damage_truth[i].total_cmp(&damage_truth[j]));
-        let damage = match hot.filter(|&h| damage_truth[h] > 0.0) {
-            None => None,
-            Some(h) => {
+        let largest = |d: &[f64]| d[3 * nu..4 * nu].iter().copied().fold(0.0, f64::max);
+        let damage = match largest(&damage_truth) {
+            t if t > 0.0 => {
                 let mut out = vec![0.0; 4 * nu];
                 let values = draws
                     .iter()
                     .map(|d| {
                         block.evaluate(&x, &d.theta, &d.response, &mut out)?;
-                        Ok(out[h])
+                        Ok(largest(&out))
                     })
                     .collect::<Result<Vec<_>>>()?;
-                Some(below(&values, damage_truth[h]))
+                Some(below(&values, t))
             }
+            _ => None,
         };
         Ok(Ranks {
             rho,

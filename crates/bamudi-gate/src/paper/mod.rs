@@ -578,14 +578,9 @@ pub fn run_scenario(
         false => Vec::new(),
     };
     clock.lap("sampling-rule sensitivity study");
-    let accuracy = estimator_accuracy(
-        &s.model,
-        cal.parts(),
-        cal.module2(),
-        cal.config(),
-        ACCURACY_SAMPLES,
-        opts.seed.wrapping_add(500 + number as u64),
-    )?;
+    let seed = opts.seed.wrapping_add(500 + number as u64);
+    let (m2, parts) = (cal.module2(), cal.parts());
+    let accuracy = estimator_accuracy(&s.model, parts, m2, cal.config(), ACCURACY_SAMPLES, seed)?;
     clock.lap("estimator accuracy (Fig. 12)");
     let x_fatigue = fatigue::condition(number);
     let profile = fatigue::damage_along_quoin(

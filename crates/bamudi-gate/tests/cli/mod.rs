@@ -249,8 +249,10 @@ fn simulate_calibrate_predict_round_trip_on_a_coarse_gate() {
         "exps.csv",
         "U(81, 105) in",
         "element size 60 in",
-        // ρ's spread is shown with what the coverage study found, not as a bare interval
-        "Not an interval for a physical force scale",
+        // the identified ρ⊥ is reported; the split's ρ is said not to be identified, not
+        // offered as an interval
+        "ρ⊥, the data's scale of the nominal force",
+        "is not identified by the data",
     ] {
         assert!(
             report.contains(piece),

@@ -6,17 +6,24 @@
 //! 1. **A fixed, wrong discrepancy** (the paper's Eq. 53-54, a shape the calibration's basis
 //!    does not contain), `θ*` drawn from the prior: the number of replicates whose 95 % `θ`
 //!    interval holds `θ*` must lie in the 1 % binomial acceptance region of p = 0.95 for
-//!    n = 40 (34..=40 hits); the same check on intervals half as wide (a Gaussian posterior's
-//!    central 67.3 % interval) must fail, so the test has the power to see over-confidence of
-//!    that size. The rank histogram is not tested here: with one discrepancy shared by every
+//!    n = 40 (34..=40 hits), and the intervals must resolve the gap (median posterior sd
+//!    ≤ 0.5 in, against prior sds of 7 and 9 in: a prior-wide interval cannot pass). The
+//!    power against over-confidence (intervals half as wide must fail the same check) is
+//!    asserted in the SBC test, not here: with a fixed discrepancy the default's intervals are
+//!    cautious (z rms 0.52 on this seed, 40/40 half-width intervals holding θ*), as the
+//!    validation's panel measures on other seeds (z sd 0.58-0.85); this check asserted it
+//!    until the default became the isotropic zero-mean prior, and failed then (issue 57: the
+//!    bound moved to where it is well posed, said here and in the closing note). The rank
+//!    histogram is not tested here either: with one discrepancy shared by every
 //!    replicate, the posterior's width carries the uncertainty of which discrepancy it is while
 //!    the replicates differ only in `θ*`, levels and noise, so the ranks bunch in the middle
 //!    (a well-calibrated method fails uniformity; the previous version of this test asserted it
 //!    and the issue called that bound ill-posed).
 //! 2. **Simulation-based calibration** (the well-posed rank test): `θ`, `ρ` and the
 //!    discrepancy drawn per replicate from the calibration's own prior, which the calibration
-//!    holds; the ranks of `θ*` must not reject uniformity at 1 %, and the 95 % intervals must
-//!    hold their level.
+//!    holds; the ranks of `θ*` must not reject uniformity at 1 %, the 95 % intervals must
+//!    hold their level, and intervals half as wide must not (the power to see over-confidence
+//!    of that size).
 
 use bamudi::validation::{Coverage, binomial_acceptance};
 use bamudi_gate::coverage::{self, CoverageOptions, ScenarioCoverage};
@@ -27,6 +34,18 @@ const ALPHA: f64 = 0.01;
 
 /// The central level of a Gaussian interval half as wide as the 95 % one: 2Φ(1.96/2) − 1.
 const HALF_WIDTH_LEVEL: f64 = 0.6729;
+
+/// The 95 % intervals' hit count lies in the acceptance region.
+fn assert_in_region(s: &ScenarioCoverage, c95: &Coverage, region: (usize, usize)) {
+    assert!(
+        (region.0..=region.1).contains(&c95.hits),
+        "{}: 95 % intervals hold θ* {}/{} times, outside the acceptance region {:?}",
+        s.name,
+        c95.hits,
+        c95.n,
+        region
+    );
+}
 
 fn hits(s: &ScenarioCoverage, level: f64) -> Coverage {
     let pits: Vec<f64> = s.replicates.iter().map(|r| r.pit).collect();
@@ -66,22 +85,16 @@ fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
             s.force_rmse_ratio_median.normal,
             s.force_rmse_ratio_median.tangential,
         );
-        // Power: intervals half as wide must be rejected by the same check.
+        // The intervals resolve the gap: the scenarios' priors are 24 and 30 in wide (sd 7, 9 in);
+        // the default's median sd on the paper's data is 0.17 in (tuning seed 2021), so 0.5 in
+        // leaves room for this seed and none for an interval that learnt nothing.
         assert!(
-            !(region.0..=region.1).contains(&half.hits),
-            "{}: half-width intervals pass ({}/{}): the check cannot see over-confidence",
+            s.theta_sd_median <= 0.5,
+            "{}: median θ sd {} in: the intervals do not resolve the gap",
             s.name,
-            half.hits,
-            half.n
+            s.theta_sd_median
         );
-        assert!(
-            (region.0..=region.1).contains(&c95.hits),
-            "{}: 95 % intervals hold θ* {}/{} times, outside the acceptance region {:?}",
-            s.name,
-            c95.hits,
-            c95.n,
-            region
-        );
+        assert_in_region(s, &c95, region);
         // The force bands: at least 0.90 of the condition × point pairs (the issue's bound) in
         // the normal force.
         assert!(
@@ -131,19 +144,21 @@ fn sbc_with_the_discrepancy_drawn_from_the_prior_has_uniform_ranks() {
             s.z_mean_sd[0],
             s.z_mean_sd[1]
         );
-        assert!(
-            (region.0..=region.1).contains(&c95.hits),
-            "{}: 95 % intervals hold θ* {}/{} times, outside {:?}",
-            s.name,
-            c95.hits,
-            c95.n,
-            region
-        );
+        assert_in_region(s, &c95, region);
         assert!(
             s.sbc_uniformity_p >= ALPHA,
             "{}: SBC rank histogram rejects uniformity (p {:.4})",
             s.name,
             s.sbc_uniformity_p
+        );
+        // Power: intervals half as wide must be rejected by the same check.
+        let half = hits(s, HALF_WIDTH_LEVEL);
+        assert!(
+            !(region.0..=region.1).contains(&half.hits),
+            "{}: half-width intervals pass ({}/{}): the check cannot see over-confidence",
+            s.name,
+            half.hits,
+            half.n
         );
     }
 }

@@ -58,7 +58,9 @@ pub struct Module3 {
     /// profiled; [`no_discrepancy`]; Fig. 16).
     pub posterior_no_discrepancy: ThetaPosterior,
     /// The no-discrepancy calibration at its posterior's support points (`ρ` per point), for
-    /// its predictions (baseline (b); `None` in files written before it existed).
+    /// its predictions (baseline (b); `None` when
+    /// [`no_discrepancy_fit`](crate::CalibrationParams::no_discrepancy_fit) is off, and in
+    /// files written before it existed).
     #[serde(default)]
     pub no_discrepancy: Option<NoDiscrepancyFit>,
     /// The marginal mode's fit (coefficient priors, amplitude, `ρ`'s posterior, the support
@@ -159,7 +161,10 @@ where
         sigma_eps,
         sigma_eps_estimated,
         covariance: factor.report(),
-        no_discrepancy: Some(NoDiscrepancyFit::new(p, &post_without)?),
+        no_discrepancy: match p.cfg.no_discrepancy_fit {
+            true => Some(NoDiscrepancyFit::new(p, &post_without)?),
+            false => None,
+        },
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: None,
@@ -218,7 +223,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O
                 c.push(y - b[(i, q)]);
             }
         }
-        let without = no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range).log_lik;
+        let without =
+            no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range, self.p.cfg.sigma_eps)
+                .log_lik;
         Ok((with, without))
     }
 

@@ -7,9 +7,12 @@
 //! * `ρ` integrated over its uniform prior (the sampling rule's `rho_range`) in closed form
 //!   (the exponent is quadratic in `ρ`; [`super::rho`]), and
 //! * `σ²` profiled at each `θ`: its maximum-likelihood value `min_ρ |c − ρ a|² / (N_s − 1)`
-//!   (`a = A g(θ)`, `c = y − b(θ)`, stacked). Holding the discrepancy model's `σ_ε` instead
-//!   would claim that a model without a discrepancy fits to the gauges' noise, and make its
-//!   `θ` posterior as narrow as a fit that does.
+//!   (`a = A g(θ)`, `c = y − b(θ)`, stacked). Holding the discrepancy model's *estimated*
+//!   `σ_ε` instead would claim that a model without a discrepancy fits to the gauges' noise,
+//!   and make its `θ` posterior as narrow as a fit that does. A noise the user states
+//!   (`CalibrationParams::sigma_eps`) is held: it is a fact about the instrument, not a fit,
+//!   and it makes this the calibration a peer without a discrepancy (KOH without `δ`,
+//!   surmise's calibrators) runs on the same likelihood.
 //!
 //! Its `θ` posterior is [`super::Module3::posterior_no_discrepancy`] (Fig. 16's comparison);
 //! its predictions are `ρ g(x, θ)` mixed over that posterior
@@ -37,8 +40,14 @@ pub(crate) struct FitAt {
     pub(crate) sigma2: f64,
 }
 
-/// [`FitAt`] from the stacked columns `a = A g(θ)` and `c = y − b(θ)` (`N_s` each).
-pub(crate) fn fit_at(a: &[f64], c: &[f64], rho_range: (f64, f64)) -> FitAt {
+/// [`FitAt`] from the stacked columns `a = A g(θ)` and `c = y − b(θ)` (`N_s` each), with the
+/// noise sd `known_sigma` the user stated, or profiled (`None`).
+pub(crate) fn fit_at(
+    a: &[f64],
+    c: &[f64],
+    rho_range: (f64, f64),
+    known_sigma: Option<f64>,
+) -> FitAt {
     let n_s = a.len();
     let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>();
     let (aa, ac, cc) = (dot(a, a), dot(a, c), dot(c, c));
@@ -46,7 +55,10 @@ pub(crate) fn fit_at(a: &[f64], c: &[f64], rho_range: (f64, f64)) -> FitAt {
         true => cc - ac * ac / aa,
         false => cc,
     };
-    let sigma2 = (ssr / (n_s.max(2) - 1) as f64).max(1e-300);
+    let sigma2 = match known_sigma {
+        Some(s) => s * s,
+        None => (ssr / (n_s.max(2) - 1) as f64).max(1e-300),
+    };
     let gram = DMatrix::from_row_slice(2, 2, &[aa, ac, ac, cc]) / sigma2;
     let terms = ThetaTerms::new(&gram, n_s as f64 * sigma2.ln(), n_s, rho_range);
     let (rho_mean, rho_var) = truncated_moments(terms.rho_hat, terms.q2, rho_range);
@@ -96,7 +108,7 @@ impl NoDiscrepancyFit {
             .par_iter()
             .map(|(theta, weight)| {
                 let (a, c) = stacked_rows(p, theta)?;
-                let f = fit_at(&a, &c, rho_range);
+                let f = fit_at(&a, &c, rho_range, p.cfg.sigma_eps);
                 Ok(NoDiscrepancyNode {
                     theta: theta.clone(),
                     weight: *weight,
@@ -172,7 +184,7 @@ mod tests {
         let a = [10.0, 20.0, 0.0, -10.0];
         let r = [0.5, 0.0, 1.0, 0.5]; // aᵀr = 5 + 0 + 0 − 5 = 0
         let c: Vec<f64> = a.iter().zip(&r).map(|(a, r)| 0.7 * a + r).collect();
-        let f = fit_at(&a, &c, (0.0, 2.0));
+        let f = fit_at(&a, &c, (0.0, 2.0), None);
         let ssr: f64 = r.iter().map(|v| v * v).sum();
         assert!((f.sigma2 - ssr / 3.0).abs() < 1e-12, "{}", f.sigma2);
         // ρ's posterior is N(0.7, σ²/600) truncated to [0, 2]: sd 0.029, 24 sd inside either
@@ -183,5 +195,23 @@ mod tests {
             "{}",
             f.rho_var
         );
+    }
+
+    /// A noise sd the user states is held, not profiled: `ρ`'s variance is then `s²/|a|²`
+    /// whatever the residual, and the log likelihood drops by the residual's `½ ssr/s²`.
+    #[test]
+    fn a_stated_noise_is_held() {
+        let a = [10.0, 20.0, 0.0, -10.0];
+        let r = [0.5, 0.0, 1.0, 0.5];
+        let c: Vec<f64> = a.iter().zip(&r).map(|(a, r)| 0.7 * a + r).collect();
+        let held = fit_at(&a, &c, (0.0, 2.0), Some(0.1));
+        assert!((held.sigma2 - 0.01).abs() < 1e-15, "{}", held.sigma2);
+        assert!((held.rho_var / (0.01 / 600.0) - 1.0).abs() < 1e-9);
+        // the same data with a residual half as large: ½ (ssr − ssr/4)/s² more log likelihood
+        let c2: Vec<f64> = a.iter().zip(&r).map(|(a, r)| 0.7 * a + 0.5 * r).collect();
+        let closer = fit_at(&a, &c2, (0.0, 2.0), Some(0.1));
+        let ssr: f64 = r.iter().map(|v| v * v).sum();
+        let gain = closer.log_lik - held.log_lik;
+        assert!((gain - 0.5 * 0.75 * ssr / 0.01).abs() < 1e-6, "{gain}");
     }
 }

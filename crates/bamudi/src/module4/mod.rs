@@ -296,8 +296,8 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     ) -> Result<Band> {
         let fit = self.cal.module3().no_discrepancy.as_ref().ok_or_else(|| {
             BamudiError::Calibration(
-                "this calibration has no no-discrepancy fit (saved by an older version): \
-                 calibrate again to compare against it"
+                "this calibration has no no-discrepancy fit (`no_discrepancy_fit = false`, or \
+                 saved by an older version): calibrate again with it to compare against it"
                     .into(),
             )
         })?;

@@ -520,7 +520,12 @@ impl<U: UnobservableModel, O: LinearObservableModel> LogPosteriors
         let st = self.stacked(theta)?;
         let with = lp + self.cov.terms(&st, self.rho_range())?.log_lik;
         let (a, c) = (st.ac.column(0), st.ac.column(1));
-        let without = no_discrepancy::fit_at(a.as_slice(), c.as_slice(), self.rho_range());
+        let without = no_discrepancy::fit_at(
+            a.as_slice(),
+            c.as_slice(),
+            self.rho_range(),
+            self.p.cfg.sigma_eps,
+        );
         Ok((with, lp + without.log_lik))
     }
 }
@@ -567,7 +572,10 @@ where
             log_det: lik.cov.log_det()?,
             jitter: 0.0,
         },
-        no_discrepancy: Some(NoDiscrepancyFit::new(p, &post_without)?),
+        no_discrepancy: match p.cfg.no_discrepancy_fit {
+            true => Some(NoDiscrepancyFit::new(p, &post_without)?),
+            false => None,
+        },
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: Some(MarginalFit {
