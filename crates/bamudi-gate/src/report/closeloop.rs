@@ -187,6 +187,25 @@ fn sensor_section(s: &mut String, r: &CloseLoopReport) {
         }
         s.push('\n');
     }
+    if !sr.coincident_findings.is_empty() {
+        let what: Vec<String> = sr
+            .coincident_findings
+            .iter()
+            .map(|f| f.describe())
+            .collect();
+        let _ = writeln!(
+            s,
+            "Not applied, because several gauges changed within a day of each other (a change of the structure, not of one sensor): {}.\n",
+            what.join("; ")
+        );
+    }
+    if let Some(w) = &sr.withheld_gap_alarm {
+        let _ = writeln!(
+            s,
+            "**Gap alarm withheld:** the track's {} of {:.2} in from day {:.2} is not raised: {}.\n",
+            w.alarm.direction, w.alarm.size, w.alarm.onset_day, w.reason
+        );
+    }
 }
 
 /// Every alarm in one table (the gauges' changes of level and the gap's change alarm), then

@@ -93,6 +93,15 @@ fn late_events_on_one_gauge_are_found_and_dated_within_a_day() {
                 .as_ref()
                 .expect("the scan runs by default");
             let name = &out.report.gauge_names[gauge];
+            if let Some(s) = out
+                .report
+                .sensor
+                .as_ref()
+                .filter(|s| !s.findings.is_empty())
+            {
+                let what: Vec<String> = s.findings.iter().map(|f| f.describe()).collect();
+                eprintln!("{shape:?} seed {seed} on {name} from day {onset:.2}: {what:?}");
+            }
             let near = |a: &&bamudi::closeloop::Alarm| {
                 &a.gauge == name
                     && a.onset_day >= onset - 1.0

@@ -10,7 +10,7 @@
 //! passed at full size too; the bounds below were not changed with it.
 
 use super::*;
-use bamudi::closeloop::EffectReport;
+use bamudi::closeloop::{EffectReport, MeasuredRecord, SensorKind};
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
 use bamudi_gate::session::ToleranceSpec;
@@ -75,6 +75,16 @@ fn run_fe_with(preset: &str, fx: FieldEffects, seed: u64) -> CloseLoopOutcome {
 /// The loop on the CSV text of `rec` with `calibrator`; prints its outcome under `label`.
 fn run_loop_on(rec: &FieldRecord, calibrator: &GateCalibrator, label: &str) -> CloseLoopOutcome {
     let data = gate::as_measured(rec, calibrator.model(), "fe_gate.csv").unwrap();
+    run_measured(&data, calibrator, label)
+}
+
+/// The loop on a measured record (the CSV text's reading), printing as [`run_loop_on`].
+fn run_measured(
+    data: &MeasuredRecord,
+    calibrator: &GateCalibrator,
+    label: &str,
+) -> CloseLoopOutcome {
+    let data = data.clone();
     let cfg = gate::close_loop_config(CloseLoopConfig::default(), &data);
     let out = close_loop(&data, calibrator, &cfg).unwrap();
     let r = &out.report;
@@ -234,6 +244,114 @@ fn fe_gate_names_the_undeclared_effect_by_its_covariate() {
     assert_found(&out, |e| {
         e.name == "generic_covariate_term" && e.covariates.iter().any(|c| c == "upper_pool")
     });
+}
+
+/// A clean FE record (no simulated effect) whose readings a wiring or logger fault then
+/// changes: `fault` edits the measured readings (rows × gauges, microstrain) in place.
+fn run_with_sensor_fault(
+    label: &str,
+    seed: u64,
+    fault: impl Fn(&mut nalgebra::DMatrix<f64>, &[f64]),
+) -> CloseLoopOutcome {
+    let c = contact();
+    let calibrator = test_calibrator(c);
+    let rec = gate::simulate_field(&record_config(seed, FieldEffects::default()), c).unwrap();
+    let mut data = gate::as_measured(&rec, calibrator.model(), "fe_gate.csv").unwrap();
+    fault(&mut data.y, &data.time_h);
+    let out = run_measured(&data, &calibrator, label);
+    if let Some(s) = &out.report.sensor {
+        eprintln!(
+            "FE {label}: sensor {:?}; tests {:?}",
+            s.findings, s.attribution_tests
+        );
+    }
+    if let Some(a) = &out.report.model_adequacy_before {
+        let top: Vec<String> = a
+            .sensor_faults
+            .iter()
+            .filter(|f| f.z.abs() > 2.0)
+            .map(|f| format!("{} {} z {:.1}", f.gauge, f.kind.name(), f.z))
+            .collect();
+        eprintln!(
+            "FE {label}: verdict {:?}; sensor signatures |z| > 2: {top:?}",
+            a.verdict
+        );
+    }
+    out
+}
+
+fn holds_true_gap(r: &bamudi::closeloop::CloseLoopReport) -> bool {
+    r.theta_after.ci95.0 <= TRUE_GAP && TRUE_GAP <= r.theta_after.ci95.1
+}
+
+/// Issue 58's first case: gauge 3 reads high over the whole record (a gauge factor entered
+/// wrong), a fault the effect library does not hold. Under the default prior (issue 57) the
+/// discrepancy absorbs a gain on one gauge: the calibration's verdict does not attribute it
+/// (measured, seed 7: gain signature z 2.6 at +4 %, 2.3 at +10 %, the verdict adequate; at +20 %
+/// inadequate by leave-one-gauge-out on g3, unattributed), so the loop has no finding to
+/// correct. What must hold is that the answer stays honest: the gap's 95 % interval holds
+/// 90 in at every size, and the held-out error stays at the noise (1.5x, the issue's bar).
+/// Measured: 90.18 ± 0.56, 89.95 ± 0.69, 89.86 ± 0.90 in against 90.02 ± 0.11 in on a clean
+/// record; the loss of precision, not a wrong gap, is the fault's cost. Seed 7: no seed of
+/// this file's other tests, and nothing in the sensor pass was set on it.
+#[test]
+fn fe_gate_a_gain_fault_leaves_the_gap_honest() {
+    for gain in [1.04, 1.10] {
+        let out = run_with_sensor_fault(&format!("gain x{gain} on g3"), 7, |y, _| {
+            y.column_mut(2).scale_mut(gain);
+        });
+        let r = &out.report;
+        assert!(holds_true_gap(r), "gain {gain}: {:?}", r.theta_after);
+        assert!(
+            r.heldout_rmse_total_after <= 1.5 * NOISE,
+            "gain {gain}: {}",
+            r.heldout_rmse_total_after
+        );
+        // a gain the verdict attributes is corrected, never left standing
+        let attributed = r
+            .model_adequacy_before
+            .as_ref()
+            .and_then(|a| a.sensor_correction.as_ref())
+            .is_some_and(|c| c.faults.iter().any(|f| f.kind.name() == "gain"));
+        let corrected = r
+            .sensor
+            .as_ref()
+            .is_some_and(|s| s.findings.iter().any(|f| f.kind == SensorKind::Gain));
+        assert_eq!(attributed, corrected, "gain {gain}: {:?}", r.sensor);
+    }
+}
+
+/// Issue 58's second case: gauges 2 and 5 exchanged from day 50 (in the test window: the
+/// calibration window is the first 60 % of the 60 days), a change purely in the wiring. The
+/// loop must name the pair and the day, undo it, hold the gap, and raise no gap alarm.
+#[test]
+fn fe_gate_a_channel_exchange_is_undone_without_a_gap_alarm() {
+    let at_day = 50.0;
+    let out = run_with_sensor_fault("g2<->g5 from day 50", 8, |y, t| {
+        for i in (0..y.nrows()).filter(|&i| t[i] / 24.0 >= at_day) {
+            y.swap((i, 1), (i, 4));
+        }
+    });
+    let r = &out.report;
+    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
+    let f = s
+        .findings
+        .iter()
+        .find(|f| f.kind == SensorKind::ChannelExchange)
+        .unwrap_or_else(|| panic!("no exchange found: {:?}", s.findings));
+    assert_eq!(f.gauge_columns, vec![1, 4]);
+    // dated within a row of day 50 (a row every 2 hours)
+    assert!(
+        (f.from_day - at_day).abs() <= ROW_HOURS / 24.0 + 1e-9,
+        "{}",
+        f.from_day
+    );
+    assert!(
+        r.alarms.iter().all(|a| a.subject != "parameter"),
+        "gap alarm for a wiring change: {:?}",
+        r.alarms
+    );
+    assert!(holds_true_gap(r), "{:?}", r.theta_after);
 }
 
 /// The drawing with its skin plate `factor` x as thick, built and condensed as [`contact`].

@@ -37,12 +37,38 @@ pub fn run(rec: &FieldRecord) -> CloseLoopOutcome {
     let gauges: Vec<&str> = rec.gauge_names.iter().map(String::as_str).collect();
     let ingest = IngestConfig::new(&["h_up", "h_down"], &gauges);
     let data = parse_csv(&rec.to_csv_string(), "simulated.csv", &ingest).unwrap();
-    close_loop(
+    let out = close_loop(
         &data,
         &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
         &toy_config(&data),
     )
-    .unwrap()
+    .unwrap();
+    // what the sensor pass did, for the reader of a failing test's output
+    if let Some(s) = out.report.sensor.as_ref() {
+        for f in &s.findings {
+            eprintln!("  sensor finding: {}", f.describe());
+        }
+        for f in &s.coincident_findings {
+            eprintln!(
+                "  not applied (other gauges at the same time): {}",
+                f.describe()
+            );
+        }
+        for t in &s.attribution_tests {
+            eprintln!(
+                "  structure or sensor: {} from day {:.2}: {} (none {:.0}, structure {:.0}, {} {:.0} + {:.1})",
+                t.subject,
+                t.from_day,
+                t.verdict,
+                t.none,
+                t.structure,
+                t.sensor_hypothesis,
+                t.sensor,
+                t.penalty
+            );
+        }
+    }
+    out
 }
 
 /// Two months, hourly by default.

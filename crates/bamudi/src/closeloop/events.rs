@@ -143,7 +143,8 @@ pub struct EventScan {
     pub method: String,
     /// The settings used.
     pub config: EventScanConfig,
-    /// Per gauge: the noise scale its changes were judged against.
+    /// Per gauge scanned: the noise scale its changes were judged against (a gauge set aside on
+    /// more than half its rows is not scanned).
     pub scales: Vec<GaugeScale>,
     /// Every change, in time order.
     pub alarms: Vec<Alarm>,
@@ -182,16 +183,22 @@ impl EventScan {
 }
 
 /// Scans every gauge's residual `r` (`n x N_o`) of `rec`; the first `n_sel` rows are those
-/// the loop fitted its effects on.
+/// the loop fitted its effects on. A gauge the sensor pass set aside (`set_aside`) on more than
+/// half its rows is not scanned: its residual there is the model's own prediction, so there is
+/// no noise left to judge a change against, and the gauge is already reported as set aside.
 pub(super) fn scan(
     rec: &MeasuredRecord,
     r: &DMatrix<f64>,
+    set_aside: &DMatrix<bool>,
     n_sel: usize,
     cfg: &EventScanConfig,
 ) -> Result<EventScan> {
     let params = cfg.params();
     let (mut scales, mut alarms) = (vec![], vec![]);
     for (g, name) in rec.gauge_names.iter().enumerate() {
+        if 2 * set_aside.column(g).iter().filter(|m| **m).count() > r.nrows() {
+            continue;
+        }
         let col: Vec<f64> = r.column(g).iter().copied().collect();
         let found = detect_mean_changes(&col, &params).map_err(|e| BamudiError::Numerical {
             context: format!("event scan of gauge {name}"),

@@ -75,6 +75,7 @@ pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperatu
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
 pub use sensor::{
     AttributionTest, SensorAction, SensorConfig, SensorFinding, SensorKind, SensorReport,
+    WithheldAlarm,
 };
 pub use stats::{Adequacy, CovariateCorrelation, GaugeCheck};
 pub use track::{ThetaTrack, TrackAlarm, TrackAnchor, TrackConfig, TrackPoint, TrackState};
@@ -374,11 +375,15 @@ pub fn close_loop_with(
         from_fold: vec![],
     };
     // the sensor pass first: the loop then looks for effects in corrected readings
-    let findings = match cfg.sensor.enabled {
+    let pre = match cfg.sensor.enabled {
         true => correct::pre_pass(&lp, rec, &st)?,
-        false => vec![],
+        false => correct::PrePass {
+            findings: vec![],
+            tests: vec![],
+        },
     };
-    let y_corr = sensor::apply(&findings, &rec.y, &st.mean, &rec.time_h, None).0;
+    let findings = &pre.findings;
+    let y_corr = sensor::apply(findings, &rec.y, &st.mean, &rec.time_h, None).0;
     let lp = lp.with_y(&y_corr);
     if !findings.is_empty() {
         let (model, mean, var) = lp.calibrate(lp.y)?;
@@ -396,7 +401,7 @@ pub fn close_loop_with(
         st,
         steps,
         conclusion,
-        findings,
+        pre,
     };
     let mut out = outcome(&lp, rec, run)?;
     out.report.wall_time_s = started.elapsed().as_secs_f64();
@@ -454,8 +459,8 @@ struct Run {
     st: State,
     steps: Vec<StepReport>,
     conclusion: String,
-    /// The sensor pass's findings before selection.
-    findings: Vec<SensorFinding>,
+    /// The sensor pass before selection.
+    pre: correct::PrePass,
 }
 
 /// The checks, error and `θ` of the first calibration.
@@ -658,7 +663,16 @@ fn with_sensor(conclusion: String, sensor: Option<&SensorReport>) -> String {
     let rest = conclusion
         .strip_prefix("no missing effect found: ")
         .unwrap_or(&conclusion);
-    format!("sensor findings: {}; then {rest}", what.join("; "))
+    let withheld = s.withheld_gap_alarm.as_ref().map_or(String::new(), |w| {
+        format!(
+            "; the parameter's change alarm ({} of {:.2} from day {:.2}) is withheld: {}",
+            w.alarm.direction, w.alarm.size, w.alarm.onset_day, w.reason
+        )
+    });
+    format!(
+        "sensor findings: {}; then {rest}{withheld}",
+        what.join("; ")
+    )
 }
 
 /// The whole-record analyses of the final state: the event scan and the parameter's track
@@ -668,11 +682,13 @@ fn whole_record(
     rec: &MeasuredRecord,
     st: &State,
     r_final: &DMatrix<f64>,
+    set_aside: &DMatrix<bool>,
 ) -> Result<(Option<EventScan>, Option<ThetaTrack>)> {
     let events = match lp.cfg.event_scan.enabled {
         true => Some(events::scan(
             rec,
             r_final,
+            set_aside,
             lp.sel.len(),
             &lp.cfg.event_scan,
         )?),
@@ -796,7 +812,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         st,
         steps,
         conclusion,
-        findings,
+        pre,
     } = run;
     let Final {
         st,
@@ -804,7 +820,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         rmse,
         checks: mut checks_after,
     } = final_state(lp, st)?;
-    let post = correct::post_pass(lp, rec, st, residual, findings)?;
+    let post = correct::post_pass(lp, rec, st, residual, pre)?;
     let rmse_after = match lp.test.is_empty() {
         true => rmse,
         false => {
@@ -828,10 +844,12 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         fitted_on_test_rows: post
             .findings
             .iter()
-            .any(|f| f.source != "adequacy verdict" && f.to_row > lp.sel.len()),
+            .any(|f| f.source != "adequacy verdict" && f.from_row >= lp.sel.len()),
         findings: post.findings.clone(),
         theta_without_corrections: None,
         heldout_rmse_after_all_corrections: rmse_all_corrections,
+        withheld_gap_alarm: post.withheld_gap_alarm.clone(),
+        coincident_findings: post.coincident.clone(),
     });
     let sensor_report = match sensor_report {
         Some(mut s) => {

@@ -18,7 +18,8 @@
 //! * after selection, every change of level the whole-record scan finds on one gauge alone
 //!   after the calibration window, unless a change of the parameter explains it better
 //!   ([`attribute`]), and the parameter's change alarm, which is withheld when a sensor
-//!   hypothesis explains the change better (the gap alarm guard).
+//!   hypothesis explains the change better, or when the residual shows no change from the
+//!   day it dates (the gap alarm guard).
 //!
 //! Corrections are applied to the readings before the loop's calibrations; set-aside cells
 //! are replaced by the model's prediction and left out of every error the report states.
@@ -86,10 +87,10 @@ pub enum SensorKind {
     Gain,
     /// A constant added to the reading (`size` in output units).
     Offset,
-    /// A linear drift (`size` = the change over the reference span, output units).
-    Drift,
     /// A step in the zero from the span's start (`size` in output units).
     Step,
+    /// A zero that drifts linearly from the span's start (`size` in output units per day).
+    Drift,
     /// Two channels exchanged from the span's start (wiring, logger remapping).
     ChannelExchange,
     /// The reading repeats exactly (a stuck or dead gauge): set aside.
@@ -104,8 +105,8 @@ impl SensorKind {
         match self {
             Self::Gain => "gain",
             Self::Offset => "offset",
-            Self::Drift => "drift",
             Self::Step => "step",
+            Self::Drift => "drift",
             Self::ChannelExchange => "channel_exchange",
             Self::Stuck => "stuck",
             Self::NoiseIncrease => "noise_increase",
@@ -146,8 +147,6 @@ pub struct SensorFinding {
     pub size_sd: Option<f64>,
     /// Unit of `size` (output units, `fraction` for a gain, `ratio` for noise).
     pub unit: String,
-    /// For a drift: the days its `size` is the change over (the shift is zero at their middle).
-    pub reference_days: Option<(f64, f64)>,
     /// Corrected or set aside.
     pub action: SensorAction,
     /// Which analysis found it.
@@ -188,16 +187,29 @@ pub struct AttributionTest {
     pub from_day: f64,
     /// Residual sum of squares over the noise variance, no change.
     pub none: f64,
-    /// The same with the best change of the parameter (one size; the model's sensitivities).
+    /// The same with the best change of the parameter: a step or a ramp from the change's start
+    /// (one size; the model's sensitivities).
     pub structure: f64,
     /// The same with the best sensor hypothesis.
     pub sensor: f64,
     /// That hypothesis, e.g. `SG3 step`.
     pub sensor_hypothesis: String,
-    /// Penalty the sensor side pays for choosing among its hypotheses (`2 ln m`).
+    /// Penalty the sensor side pays for choosing among its `m` hypotheses against the
+    /// structure's two (`2 ln m − 2 ln 2`).
     pub penalty: f64,
-    /// `sensor` or `structure`.
+    /// `sensor` (its score plus the penalty below the structure's), `structure` (else, when
+    /// the change of the parameter lowers the score by at least the χ²₁ 99 % quantile, 6.6),
+    /// or `unsupported` (neither: the residual does not show a change from that day).
     pub verdict: String,
+}
+
+/// A change alarm of the parameter the structure-or-sensor test withheld.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WithheldAlarm {
+    /// The alarm as the track raised it.
+    pub alarm: super::TrackAlarm,
+    /// Why it was withheld, in words.
+    pub reason: String,
 }
 
 /// Everything the sensor pass found and did (`sensor` in `results.json`).
@@ -221,6 +233,14 @@ pub struct SensorReport {
     /// window too (fitted on its rows: in-sample); the report's `heldout_rmse_after` counts
     /// only the corrections that start before it (output units; `None` without a test window).
     pub heldout_rmse_after_all_corrections: Option<Vec<f64>>,
+    /// The parameter's change alarm, withheld, and why (`attribution_tests` holds the tests).
+    #[serde(default)]
+    pub withheld_gap_alarm: Option<WithheldAlarm>,
+    /// One-gauge findings (each a sensor's by its own test) not applied because findings on
+    /// other gauges start within a day of them: one change on several gauges at once is the
+    /// structure's doing, not a sensor's.
+    #[serde(default)]
+    pub coincident_findings: Vec<SensorFinding>,
 }
 
 /// The readings with every correction applied, and the set-aside cells (`true`), whose
@@ -243,11 +263,8 @@ pub(crate) fn apply(
             SensorKind::Gain => span.for_each(|i| out[(i, g)] /= 1.0 + size),
             SensorKind::Offset | SensorKind::Step => span.for_each(|i| out[(i, g)] -= size),
             SensorKind::Drift => {
-                let (a, b) = f.reference_days.unwrap_or((f.from_day, f.to_day));
-                let len = (b - a).max(1e-9);
-                for i in span {
-                    out[(i, g)] -= size * ((time_h[i] / 24.0 - a) / len - 0.5);
-                }
+                let t0 = time_h[f.from_row.min(y.nrows() - 1)];
+                span.for_each(|i| out[(i, g)] -= size * (time_h[i] - t0) / 24.0);
             }
             SensorKind::ChannelExchange => {
                 let h = f.gauge_columns[1];
@@ -275,8 +292,6 @@ pub(crate) struct ScanInput<'a> {
     pub residual: &'a DMatrix<f64>,
     /// The model's prediction (mean + accepted effects), every row.
     pub fitted: &'a DMatrix<f64>,
-    /// The calibration window's rows.
-    pub cal: &'a [usize],
     pub unit: &'a str,
 }
 
@@ -308,7 +323,6 @@ impl ScanInput<'_> {
             size: size.0,
             size_sd: size.1,
             unit: size.2.to_string(),
-            reference_days: None,
             action: match kind {
                 SensorKind::Stuck | SensorKind::NoiseIncrease => SensorAction::SetAside,
                 _ => SensorAction::Corrected,
@@ -319,16 +333,16 @@ impl ScanInput<'_> {
     }
 }
 
-/// The faults the calibration's own verdict attributed to sensors, as corrections over the
-/// whole record (a step from its position). Positions are fractions of the calibration's rows,
-/// taken as evenly spread over the calibration window.
+/// The faults the calibration's own verdict attributed to sensors that the loop's effect
+/// library cannot fit, as corrections over the whole record: a gain, and a constant offset.
+/// A step and a drift are left to the library's `gauge_offset_jump` and `gauge_drift`, which
+/// date and size them on every row of the record, selected by cross-validation; the verdict
+/// sees only the calibration's rows, whose positions in time it does not carry.
 pub(crate) fn from_verdict(inp: &ScanInput<'_>, verdict: &AdequacyReport) -> Vec<SensorFinding> {
     let Some(corr) = &verdict.sensor_correction else {
         return vec![];
     };
     let n = inp.rec.len();
-    let (c0, c1) = (inp.cal[0], *inp.cal.last().unwrap_or(&inp.cal[0]));
-    let (d0, d1) = (inp.day(c0), inp.day(c1));
     corr.faults
         .iter()
         .filter_map(|f| {
@@ -358,31 +372,7 @@ pub(crate) fn from_verdict(inp: &ScanInput<'_>, verdict: &AdequacyReport) -> Vec
                     src,
                     evidence,
                 ),
-                FaultKind::Drift => {
-                    let mut d = inp.finding(
-                        SensorKind::Drift,
-                        vec![g],
-                        (0, n),
-                        (Some(f.estimate), Some(f.sd), unit),
-                        src,
-                        evidence,
-                    );
-                    d.reference_days = Some((d0, d1));
-                    d
-                }
-                FaultKind::Step => {
-                    let at = f.at_fraction.unwrap_or(0.5);
-                    let row = inp.cal[((at * (inp.cal.len() - 1) as f64).round() as usize)
-                        .min(inp.cal.len() - 1)];
-                    inp.finding(
-                        SensorKind::Step,
-                        vec![g],
-                        (row, n),
-                        (Some(f.estimate), Some(f.sd), unit),
-                        src,
-                        evidence,
-                    )
-                }
+                FaultKind::Drift | FaultKind::Step => return None,
             })
         })
         .collect()
@@ -463,6 +453,58 @@ pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<Sens
     out
 }
 
+/// Changes of gain: for every gauge and onset `τ`, the decrease of the residual sum of squares
+/// (over the gauge's noise variance) when a gain change `k · fitted` is removed from `τ` to the
+/// end; a finding when its best exceeds `penalty_per_change_ln_n · ln n + 2 ln(gauges)`, the
+/// exchange scan's modified BIC with one choice among the gauges. It finds a gain change too
+/// small to move the gauge's level or its noise (on a gauge whose strain swings about zero),
+/// which the whole-record scan and the noise scan cannot see. Gauges in `skip` are not scanned.
+pub(crate) fn gain_scan(
+    inp: &ScanInput<'_>,
+    cfg: &SensorConfig,
+    skip: &[usize],
+) -> Vec<SensorFinding> {
+    let (r, m) = (inp.residual, inp.fitted);
+    let (n, k) = (r.nrows(), r.ncols());
+    if n < 2 * cfg.min_span_rows {
+        return vec![];
+    }
+    let var = noise_var(r);
+    let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * (k as f64).ln();
+    let mut out = vec![];
+    for g in (0..k).filter(|g| !skip.contains(g)) {
+        let (mut mr, mut mm) = (0.0, 0.0);
+        let mut best: Option<(f64, usize, f64, f64)> = None;
+        for i in (cfg.min_span_rows..n).rev() {
+            mr += m[(i, g)] * r[(i, g)];
+            mm += m[(i, g)] * m[(i, g)];
+            if n - i < cfg.min_span_rows || mm <= 0.0 {
+                continue;
+            }
+            let stat = mr * mr / mm / var[g];
+            if best.is_none_or(|b| stat > b.0) {
+                best = Some((stat, i, mr / mm, (var[g] / mm).sqrt()));
+            }
+        }
+        let Some((stat, at, size, sd)) = best.filter(|b| b.0 > threshold) else {
+            continue;
+        };
+        out.push(inp.finding(
+            SensorKind::Gain,
+            vec![g],
+            (at, n),
+            (Some(size), Some(sd), "fraction"),
+            "gain scan",
+            format!(
+                "a gain change of {} from day {:.2} lowers the residual sum of squares by {stat:.0} noise variances (threshold {threshold:.1})",
+                inp.rec.gauge_names[g],
+                inp.day(at)
+            ),
+        ));
+    }
+    out
+}
+
 /// Whether exchanging `a` and `b` from `at` lowers the residual more than a free level change
 /// of each gauge from `at` (two parameters).
 fn beats_two_steps(
@@ -522,8 +564,14 @@ pub(crate) fn stuck_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<SensorF
 /// Noise increases: on each gauge, changes of level of `ln(d²)` (`d` the residual's first
 /// differences) by the event scan's method; an increase by at least `2 ln(noise_ratio)` (the
 /// sd ratio) on one or two gauges sets the gauge aside until the level falls back. Three or
-/// more gauges at once are not a sensor (the model's misfit grew).
-pub(crate) fn noise_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Result<Vec<SensorFinding>> {
+/// more gauges at once are not a sensor (the model's misfit grew). Gauges in `skip` (already
+/// set aside or exchanged) are not scanned: their corrected residual is the model's own
+/// prediction over the span, whose differences carry no noise to measure.
+pub(crate) fn noise_scan(
+    inp: &ScanInput<'_>,
+    cfg: &SensorConfig,
+    skip: &[usize],
+) -> Result<Vec<SensorFinding>> {
     use numerics::changepoint::{MeanChangeParams, detect_mean_changes};
     let r = inp.residual;
     let (n, k) = (r.nrows(), r.ncols());
@@ -537,7 +585,7 @@ pub(crate) fn noise_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Result<Vec<
     };
     let jump = 2.0 * cfg.noise_ratio.ln();
     let mut out = vec![];
-    for g in 0..k {
+    for g in (0..k).filter(|g| !skip.contains(g)) {
         let z: Vec<f64> = (1..n)
             .map(|i| ((r[(i, g)] - r[(i - 1, g)]).powi(2) + 1e-12).ln())
             .collect();
@@ -554,6 +602,10 @@ pub(crate) fn noise_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Result<Vec<
                 .changes
                 .get(j + 1)
                 .map_or(n, |next| next.first_row_after + 1);
+            if explained_by_gain(inp, g, (from, to), cfg) {
+                // a change of gain, not of noise: the gain scan after selection judges it
+                continue;
+            }
             let ratio = (0.5 * c.size).exp();
             out.push(inp.finding(
                 SensorKind::NoiseIncrease,
@@ -574,13 +626,49 @@ pub(crate) fn noise_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Result<Vec<
     Ok(if gauges.len() >= 3 { vec![] } else { out })
 }
 
+/// A change of a gauge's gain from row `from` looks like a noise increase in the residual's
+/// first differences (the residual is `k · fitted`, which moves with the load): it is a gain
+/// change, not noise, when the span's slope on the fitted values passes the scans'
+/// modified-BIC penalty (`z² > penalty_per_change_ln_n · ln n`) and removing it brings the
+/// noise of the span back below `noise_ratio` times the noise before it.
+fn explained_by_gain(
+    inp: &ScanInput<'_>,
+    g: usize,
+    (from, to): (usize, usize),
+    cfg: &SensorConfig,
+) -> bool {
+    use numerics::robust::noise_sd_from_differences as sd_of;
+    let (r, m) = (inp.residual, inp.fitted);
+    if from < cfg.min_span_rows {
+        return false;
+    }
+    let sd_before = sd_of(&(0..from).map(|i| r[(i, g)]).collect::<Vec<_>>());
+    let (mr, mm) = (from..to).fold((0.0, 0.0), |(a, b), i| {
+        (a + m[(i, g)] * r[(i, g)], b + m[(i, g)] * m[(i, g)])
+    });
+    if !(mm > 0.0 && sd_before > 0.0) {
+        return false;
+    }
+    let k = mr / mm;
+    let sd_after = sd_of(
+        &(from..to)
+            .map(|i| r[(i, g)] - k * m[(i, g)])
+            .collect::<Vec<_>>(),
+    );
+    let z2 = k * k * mm / sd_after.max(sd_before).powi(2);
+    let n = r.nrows() as f64;
+    z2 >= cfg.penalty_per_change_ln_n * n.ln() && sd_after < cfg.noise_ratio * sd_before
+}
+
 /// The structure-or-sensor test of a change starting at `from` on the residual `r` (every
-/// gauge, rows `from..n`): the best change of the parameter, `Δ · J` with `J` the model's
-/// sensitivity to it at each row (one size for every gauge), against the best sensor
-/// hypothesis on one gauge (a step, a gain change `k · fitted`) or a pair (an exchange of
-/// readings), each scored by its residual sum of squares over the noise variance. Both sides
-/// fit one size (the exchange none), so the sensor side pays `2 ln m` for choosing among its
-/// `m` hypotheses. Sensor when its score plus that penalty is below the structure's.
+/// gauge, rows `from..n`): the best change of the parameter, `Δ · J` or `Δ · J · (t − t_from)`
+/// with `J` the model's sensitivity to it at each row (one size for every gauge; a step or a
+/// ramp), against the best sensor hypothesis on one gauge (a step, a drift from `from`, a gain
+/// change `k · fitted`) or a pair (an exchange of readings), each scored by its residual sum of
+/// squares over the noise variance. Each side fits one size (the exchange none) and pays `2 ln`
+/// of the number of hypotheses it chose among. Sensor when its score plus the difference of
+/// those penalties is below the structure's; structure when, otherwise, the parameter's change
+/// removes at least [`CHANGE_EVIDENCE`]; `unsupported` when neither.
 pub(crate) fn attribute(
     subject: &str,
     inp: &ScanInput<'_>,
@@ -594,18 +682,26 @@ pub(crate) fn attribute(
     let none: f64 = (0..k)
         .map(|g| rows.clone().map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
         .sum();
-    // structure: one Δ, weighted least squares over every gauge
-    let (mut jr, mut jj) = (0.0, 0.0);
-    for g in 0..k {
-        for i in rows.clone() {
-            jr += sensitivity[(i, g)] * r[(i, g)] / var[g];
-            jj += sensitivity[(i, g)].powi(2) / var[g];
+    // structure: one Δ, weighted least squares over every gauge, as a step of the parameter
+    // from `from` or a ramp from it (a gap that opens suddenly or grows)
+    let t0 = inp.rec.time_h[from];
+    let structure_fit = |shape: &dyn Fn(usize) -> f64| {
+        let (mut jr, mut jj) = (0.0, 0.0);
+        for g in 0..k {
+            for i in rows.clone() {
+                let j = sensitivity[(i, g)] * shape(i);
+                jr += j * r[(i, g)] / var[g];
+                jj += j * j / var[g];
+            }
         }
-    }
-    let structure = none - if jj > 0.0 { jr * jr / jj } else { 0.0 };
+        none - if jj > 0.0 { jr * jr / jj } else { 0.0 }
+    };
+    let structure =
+        structure_fit(&|_| 1.0).min(structure_fit(&|i| (inp.rec.time_h[i] - t0) / 24.0));
     // sensor: one gauge's step or gain change, or one pair's exchange
     let mut best: (f64, String, Option<SensorFinding>) = (f64::INFINITY, String::new(), None);
     let len = (n - from) as f64;
+    let per_day = format!("{} per day", inp.unit);
     for g in 0..k {
         let sum: f64 = rows.clone().map(|i| r[(i, g)]).sum();
         let step = none - sum * sum / len / var[g];
@@ -614,7 +710,24 @@ pub(crate) fn attribute(
             (a + truth * r[(i, g)], b + truth * truth)
         });
         let gain = none - if mm > 0.0 { mr * mr / mm / var[g] } else { 0.0 };
+        // a drift from `from`: the reading's zero moves by `slope` per day
+        let (ur, uu) = rows.clone().fold((0.0, 0.0), |(a, b), i| {
+            let u = (inp.rec.time_h[i] - t0) / 24.0;
+            (a + u * r[(i, g)], b + u * u)
+        });
+        let drift = none - if uu > 0.0 { ur * ur / uu / var[g] } else { 0.0 };
         let name = &inp.rec.gauge_names[g];
+        if drift < best.0 && uu > 0.0 {
+            let f = inp.finding(
+                SensorKind::Drift,
+                vec![g],
+                (from, n),
+                (Some(ur / uu), Some((var[g] / uu).sqrt()), &per_day),
+                "structure-or-sensor test",
+                String::new(),
+            );
+            best = (drift, format!("{name} drift"), Some(f));
+        }
         if step < best.0 {
             let sd = (var[g] / len).sqrt();
             let f = inp.finding(
@@ -665,9 +778,15 @@ pub(crate) fn attribute(
             }
         }
     }
-    let m_hyp = (2 * k + k * (k - 1) / 2) as f64;
-    let penalty = 2.0 * m_hyp.ln();
+    // each side pays 2 ln of the number of hypotheses it chose among (the structure 2)
+    let m_hyp = (3 * k + k * (k - 1) / 2) as f64;
+    let penalty = 2.0 * (m_hyp.ln() - 2f64.ln());
     let sensor_wins = best.0 + penalty < structure;
+    let verdict = match (sensor_wins, none - structure >= CHANGE_EVIDENCE) {
+        (true, _) => "sensor",
+        (false, true) => "structure",
+        (false, false) => "unsupported",
+    };
     let test = AttributionTest {
         subject: subject.into(),
         from_day: inp.day(from),
@@ -676,9 +795,10 @@ pub(crate) fn attribute(
         sensor: best.0,
         sensor_hypothesis: best.1.clone(),
         penalty,
-        verdict: if sensor_wins { "sensor" } else { "structure" }.into(),
+        verdict: verdict.into(),
     };
-    let finding = best.2.filter(|_| sensor_wins).map(|mut f| {
+    let finding = best.2.filter(|_| sensor_wins).map(|f| refine_onset(inp, f));
+    let finding = finding.map(|mut f| {
         f.evidence = format!(
             "{subject} from day {:.2}: {} explains the change better than a change of the parameter (residual sum of squares {:.0} + penalty {penalty:.1} against {:.0} noise variances)",
             test.from_day, best.1, best.0, structure
@@ -686,6 +806,58 @@ pub(crate) fn attribute(
         f
     });
     (test, finding)
+}
+
+/// Least decrease of the residual sum of squares (in noise variances) a change of the
+/// parameter must bring to be called structure: the 99 % quantile of χ² with one degree of
+/// freedom (one size fitted). A change below it is `unsupported`: the residual does not show
+/// the change the alarm dates.
+const CHANGE_EVIDENCE: f64 = 6.635;
+
+/// Days either side of a tested change's start over which a one-gauge finding's own onset is
+/// looked for: the scan dates a change by its first clear level shift, which for a slow drift
+/// or a small gain comes days after the fault began.
+const ONSET_SEARCH_DAYS: f64 = 3.0;
+
+/// A one-gauge finding (step, drift, gain change) re-dated and re-sized at the onset within
+/// [`ONSET_SEARCH_DAYS`] of its start whose single regressor removes the most of the gauge's
+/// residual sum of squares (the start the test used is one of the candidates).
+fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
+    let (r, m) = (inp.residual, inp.fitted);
+    let t = &inp.rec.time_h;
+    let (n, g) = (r.nrows(), f.gauge_columns[0]);
+    let regressor = |i: usize, from: usize| match f.kind {
+        SensorKind::Step => Some(1.0),
+        SensorKind::Drift => Some((t[i] - t[from]) / 24.0),
+        SensorKind::Gain => Some(m[(i, g)]),
+        _ => None,
+    };
+    if regressor(f.from_row, f.from_row).is_none() {
+        return f;
+    }
+    let near = |i: usize| (t[i] - t[f.from_row]).abs() <= ONSET_SEARCH_DAYS * 24.0;
+    let fit = |from: usize| {
+        let (xr, xx) = (from..n).fold((0.0, 0.0), |(a, b), i| {
+            let x = regressor(i, from).unwrap_or(0.0);
+            (a + x * r[(i, g)], b + x * x)
+        });
+        (if xx > 0.0 { xr * xr / xx } else { 0.0 }, xr, xx)
+    };
+    let best = (0..n.saturating_sub(2))
+        .filter(|&i| near(i))
+        .map(|i| (i, fit(i)))
+        .max_by(|a, b| a.1.0.total_cmp(&b.1.0));
+    let Some((from, (_, xr, xx))) = best.filter(|b| b.1.2 > 0.0) else {
+        return f;
+    };
+    let var = noise_var(r)[g];
+    SensorFinding {
+        from_row: from,
+        from_day: inp.day(from),
+        size: Some(xr / xx),
+        size_sd: Some((var / xx).sqrt()),
+        ..f
+    }
 }
 
 /// The model's sensitivity to its parameter at every row: half the difference of its means at
@@ -766,7 +938,6 @@ mod tests {
             rec: &rec,
             residual: &r,
             fitted: &fitted,
-            cal: &(0..200).collect::<Vec<_>>(),
             unit: "microstrain",
         };
         let f = exchange_scan(&inp, &SensorConfig::default());
@@ -793,9 +964,58 @@ mod tests {
     }
 
     #[test]
+    fn the_verdicts_gain_and_offset_become_corrections_and_its_step_and_drift_do_not() {
+        use crate::adequacy::{SensorCorrection, SensorFault};
+        let n = 50;
+        let rec = record(DMatrix::from_element(n, 3, 10.0));
+        let fault = |gauge: &str, kind, estimate| SensorFault {
+            gauge: gauge.into(),
+            kind,
+            estimate,
+            sd: 0.01,
+            z: estimate / 0.01,
+            at_fraction: (kind == FaultKind::Step).then_some(0.5),
+            p_value: 1e-6,
+        };
+        let mut verdict = AdequacyReport::not_assessed("a test", 0.01);
+        verdict.sensor_correction = Some(SensorCorrection {
+            faults: vec![
+                fault("SG1", FaultKind::Gain, 0.05),
+                fault("SG2", FaultKind::Offset, 2.0),
+                fault("SG3", FaultKind::Step, 4.0),
+                fault("SG3", FaultKind::Drift, 1.0),
+            ],
+            shift: DMatrix::zeros(0, 0),
+        });
+        let zeros = DMatrix::zeros(n, 3);
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &zeros,
+            fitted: &rec.y,
+            unit: "microstrain",
+        };
+        let f = from_verdict(&inp, &verdict);
+        let got: Vec<(SensorKind, usize, usize)> = f
+            .iter()
+            .map(|f| (f.kind, f.gauge_columns[0], f.from_row))
+            .collect();
+        assert_eq!(
+            got,
+            vec![(SensorKind::Gain, 0, 0), (SensorKind::Offset, 1, 0)]
+        );
+        // applied over the whole record: 10.5 read with a +5 % gain is 10.5 / 1.05 = 10
+        let mut y = rec.y.clone();
+        y.column_mut(0).fill(10.5);
+        y.column_mut(1).fill(12.0);
+        let (fixed, mask) = apply(&f, &y, &zeros, &rec.time_h, None);
+        assert!((&fixed - &rec.y).abs().max() < 1e-12, "{fixed}");
+        assert!(!mask.iter().any(|m| *m));
+    }
+
+    #[test]
     fn a_stuck_gauge_is_set_aside_and_noise_is_not_stuck() {
         let n = 200;
-        let mut y = DMatrix::from_fn(n, 3, |i, g| wiggle(i, g));
+        let mut y = DMatrix::from_fn(n, 3, wiggle);
         for i in 150..n {
             y[(i, 2)] = 0.0; // a dead channel reads zero
         }
@@ -805,7 +1025,6 @@ mod tests {
             rec: &rec,
             residual: &y,
             fitted: &fitted,
-            cal: &(0..100).collect::<Vec<_>>(),
             unit: "microstrain",
         };
         let f = stuck_scan(&inp, &SensorConfig::default());
@@ -827,7 +1046,6 @@ mod tests {
         let fitted = DMatrix::from_fn(n, 4, |i, g| 20.0 * load(i) * (g as f64 + 1.0));
         let rec = record(fitted.clone());
         let from = 200;
-        let cal: Vec<usize> = (0..150).collect();
         // a change of the parameter by 4 units from row 200
         let r = DMatrix::from_fn(n, 4, |i, g| {
             wiggle(i, g) + if i >= from { 4.0 * sens[(i, g)] } else { 0.0 }
@@ -836,7 +1054,6 @@ mod tests {
             rec: &rec,
             residual: &r,
             fitted: &fitted,
-            cal: &cal,
             unit: "microstrain",
         };
         let (t, f) = attribute("gap alarm", &inp, &sens, from);

@@ -42,7 +42,11 @@ fn a_channel_exchange_is_undone_and_raises_no_gap_alarm() {
             .unwrap_or_else(|| panic!("no exchange found: {:?}", s.findings));
         assert_eq!(f.gauges, vec!["g2", "g5"]);
         assert!(f.from_row.abs_diff(at) <= 2, "onset row {}", f.from_row);
-        assert!(!gap_alarm(&r), "gap alarm for a wiring change: {:?}", r.alarms);
+        assert!(
+            !gap_alarm(&r),
+            "gap alarm for a wiring change: {:?}",
+            r.alarms
+        );
         assert!(holds(&r, 90.0), "{:?}", r.theta_after);
         // the error with every correction; for the exchange in the test window it is fitted
         // on test rows (`fitted_on_test_rows`), so it is not out of sample there
@@ -51,7 +55,11 @@ fn a_channel_exchange_is_undone_and_raises_no_gap_alarm() {
         assert!(total < 1.5, "{all:?}");
         assert_eq!(s.fitted_on_test_rows, at >= 864);
         if at < 648 {
-            assert!(r.heldout_rmse_total_after < 1.5, "{}", r.heldout_rmse_total_after);
+            assert!(
+                r.heldout_rmse_total_after < 1.5,
+                "{}",
+                r.heldout_rmse_total_after
+            );
         }
     }
 }
@@ -75,7 +83,11 @@ fn a_dead_gauge_is_set_aside_from_when_it_died() {
     assert_eq!(s.set_aside_cells, ROWS - 700);
     assert!(r.effects.is_empty(), "{:?}", r.effects);
     assert!(!gap_alarm(&r));
-    assert!(r.heldout_rmse_total_after < 1.5, "{}", r.heldout_rmse_total_after);
+    assert!(
+        r.heldout_rmse_total_after < 1.5,
+        "{}",
+        r.heldout_rmse_total_after
+    );
     assert!(holds(&r, 90.0), "{:?}", r.theta_after);
 }
 
@@ -102,9 +114,7 @@ fn a_gap_change_is_not_taken_for_a_sensor() {
     assert!(s.findings.is_empty(), "{:?}", s.findings);
     assert!(gap_alarm(&r), "{:?}", r.alarms);
     assert!(
-        s.attribution_tests
-            .iter()
-            .all(|t| t.verdict == "structure"),
+        s.attribution_tests.iter().all(|t| t.verdict == "structure"),
         "{:?}",
         s.attribution_tests
     );
@@ -119,5 +129,58 @@ fn clean_records_have_no_sensor_finding() {
         let s = r.sensor.as_ref().unwrap();
         assert!(s.findings.is_empty(), "seed {seed}: {:?}", s.findings);
         assert!(r.alarms.is_empty(), "seed {seed}: {:?}", r.alarms);
+    }
+}
+
+/// A drift or a change of gain on one gauge from hour 900 (day 37.5, in the test window), in
+/// the newest data where the loop fits nothing: the structure-or-sensor test must call each a
+/// sensor fault of the right kind on the right gauge, date it (within a day) and size it
+/// (within 10 %: the fit is against the model's mean, not the true strain), and no gap alarm
+/// may fire. The drift hypothesis, the onset search and the 6.6 evidence bound were worked
+/// out on seeds 55-59 (drifts of 0.05-0.2 per hour on g1-g3, gains of 3-5 % on g1 and g4,
+/// where a 0.2 drift on g2 raised a spurious gap alarm dated day 15.5). Seeds 61-64 were
+/// meant for validation, but seed 64 (8 % on g5, whose strain swings about zero) failed and
+/// led to the gain scan, so 61-64 are design cases too; seeds 65 and 66 were added after the
+/// gain scan and played no part in it.
+#[test]
+fn a_drift_or_gain_change_on_one_gauge_is_corrected_without_a_gap_alarm() {
+    let at = 900;
+    let cases = [
+        (61u64, 3usize, SensorKind::Drift, 0.08 * 24.0),
+        (62, 4, SensorKind::Drift, 0.15 * 24.0),
+        (63, 1, SensorKind::Gain, 0.04),
+        (64, 4, SensorKind::Gain, 0.08),
+        (65, 2, SensorKind::Gain, 0.06),
+        (66, 0, SensorKind::Drift, 0.1 * 24.0),
+    ];
+    for (seed, g, kind, size) in cases {
+        let mut rec = record_with(&ToyGate::default(), ROWS, seed, |_, _| 0.0).unwrap();
+        for i in at..ROWS {
+            match kind {
+                SensorKind::Drift => rec.y[(i, g)] += size * (i - at) as f64 / 24.0,
+                _ => rec.y[(i, g)] *= 1.0 + size,
+            }
+        }
+        let r = loop_on(&rec);
+        let s = r.sensor.as_ref().unwrap();
+        let what: Vec<String> = s.findings.iter().map(|f| f.describe()).collect();
+        eprintln!("{kind:?} {size} on g{}: {what:?}\n{}", g + 1, r.conclusion);
+        let f = s
+            .findings
+            .iter()
+            .find(|f| f.kind == kind && f.gauge_columns == [g])
+            .unwrap_or_else(|| panic!("{kind:?} on g{} not found: {what:?}", g + 1));
+        assert!(f.from_row.abs_diff(at) <= 24, "onset row {}", f.from_row);
+        let got = f.size.unwrap();
+        assert!(
+            (got - size).abs() <= 0.1 * size,
+            "size {got} against {size}"
+        );
+        assert!(
+            !gap_alarm(&r),
+            "gap alarm for a sensor fault: {:?}",
+            r.alarms
+        );
+        assert!(holds(&r, 90.0), "{:?}", r.theta_after);
     }
 }

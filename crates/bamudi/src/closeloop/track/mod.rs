@@ -111,7 +111,7 @@ pub struct TrackPoint {
 
 /// The sequential change alarm, dated and sized by the single step that best explains the
 /// window estimates around it.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrackAlarm {
     /// Day the CUSUM crossed its threshold (end of that window).
     pub day: f64,
