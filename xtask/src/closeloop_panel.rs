@@ -419,7 +419,7 @@ fn inject(
                 }
             }
         }
-        "none" => {}
+        "none" | "clean" => {}
         k => bail!("unknown kind `{k}`"),
     }
     Ok(gap_end)
@@ -540,7 +540,7 @@ fn score(
                 || effect("gauge_offset_jump", &[])
                 || gauge_alarm
         }
-        "drift" => effect("gauge_drift", &[]),
+        "drift" => finding(&[SensorKind::Drift]) || effect("gauge_drift", &[]),
         "exchange" => finding(&[SensorKind::ChannelExchange]),
         "stuck" | "dead" => finding(&[SensorKind::Stuck]),
         "noise" => finding(&[SensorKind::NoiseIncrease]),
@@ -569,12 +569,32 @@ fn score(
         onset: onset.into(),
         seed,
         cause,
-        rmse_ratio: r.heldout_rmse_total_after / noise,
+        rmse_ratio: test_rmse(r) / noise,
         covered: r.theta_after.ci95.0 <= gap_end && gap_end <= r.theta_after.ci95.1,
         gap_alarm: gap_alarm && (sensor_kind || kind == "clean"),
         false_finding: kind == "clean" && !cause,
         wall_s,
         named: named(r),
+    }
+}
+
+/// The test window's RMSE over every gauge after the loop. A sensor correction that starts in
+/// the test window is fitted on its rows, so the out-of-sample figure leaves it out and an
+/// exchanged or stuck gauge there would count as error; the figure with every correction is
+/// taken instead (in-sample for that gauge and span; the report's `fitted_on_test_rows` says
+/// so). Gauges set aside on every test row (no value) are left out.
+fn test_rmse(r: &CloseLoopReport) -> f64 {
+    let all = r
+        .sensor
+        .as_ref()
+        .filter(|s| s.fitted_on_test_rows)
+        .and_then(|s| s.heldout_rmse_after_all_corrections.as_ref());
+    match all {
+        Some(v) => {
+            let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+            (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
+        }
+        None => r.heldout_rmse_total_after,
     }
 }
 

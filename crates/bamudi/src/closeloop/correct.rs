@@ -31,6 +31,7 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
         residual: &r,
         fitted: &st.mean,
         unit: &lp.cfg.output_unit,
+        earliest: 0,
     };
     let mut sens: Option<DMatrix<f64>> = None;
     let mut tests = vec![];
@@ -39,9 +40,10 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
             sens = Some(sensor::sensitivity(st.model.as_ref(), lp.x)?);
         }
         let subject = format!("{} {}", f.gauges.join("<->"), f.kind.name());
-        let (test, _) = sensor::attribute(&subject, inp, sens.as_ref().unwrap(), f.from_row);
+        let (test, found) = sensor::attribute(&subject, inp, sens.as_ref().unwrap(), f.from_row);
         log::info!("{subject} from day {:.2}: {}", f.from_day, test.verdict);
-        let sensor = test.verdict == "sensor";
+        // the test's own best sensor hypothesis must be this finding
+        let sensor = found.is_some_and(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns);
         tests.push(test);
         Ok(sensor)
     };
@@ -170,6 +172,7 @@ pub(super) fn post_pass(
             residual: &residual,
             fitted: &fitted,
             unit: &lp.cfg.output_unit,
+            earliest: cal_end(lp),
         };
         let (test, finding) = sensor::attribute("gap alarm", &inp, &sens, from);
         log::info!(
@@ -186,7 +189,12 @@ pub(super) fn post_pass(
                 test.from_day,
                 test.none - test.structure
             )),
-            (_, 0) => None,
+            ("sensor", 0) if finding.is_some() => None,
+            ("sensor", 0) => Some(format!(
+                "{} explains the change better than a change of the parameter, and it starts \
+                 in the calibration window, which the loop does not re-calibrate after selection",
+                test.sensor_hypothesis
+            )),
             _ => Some(format!(
                 "{} explains the change better than a change of the parameter, before and after \
                  its correction",
@@ -225,8 +233,9 @@ fn scan_alarm_findings(
         residual: &post.residual,
         fitted: &fitted,
         unit: &lp.cfg.output_unit,
+        earliest: cal_end(lp),
     };
-    let n_cal = lp.cal.len();
+    let n_cal = cal_end(lp);
     let mut out: Vec<SensorFinding> = vec![];
     let mut tests = vec![];
     for a in events
@@ -258,6 +267,11 @@ fn scan_alarm_findings(
         }
     }
     (out, tests)
+}
+
+/// One past the last row of the calibration window.
+fn cal_end(lp: &Loop<'_>) -> usize {
+    lp.cal.last().map_or(0, |&c| c + 1)
 }
 
 /// Days within which one-gauge findings on different gauges count as one change.
@@ -297,6 +311,7 @@ fn gain_findings(
         residual: &post.residual,
         fitted: &fitted,
         unit: &lp.cfg.output_unit,
+        earliest: cal_end(lp),
     };
     let skip: Vec<usize> = post
         .findings

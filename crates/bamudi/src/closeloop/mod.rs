@@ -242,7 +242,9 @@ pub struct CloseLoopReport {
     /// test window; microstrain).
     pub heldout_rmse_before: Vec<f64>,
     /// RMSE per gauge after the loop on the error window, with every accepted effect fitted
-    /// on all rows before it (microstrain).
+    /// on all rows before it (microstrain); `NaN` (JSON `null`) for a gauge set aside on every
+    /// row of the window.
+    #[serde(deserialize_with = "stats::nan_as_null::vec")]
     pub heldout_rmse_after: Vec<f64>,
     /// RMSE over all gauges before, on the error window (microstrain).
     pub heldout_rmse_total_before: f64,

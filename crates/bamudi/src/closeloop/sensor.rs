@@ -30,6 +30,9 @@ use crate::error::{BamudiError, Result};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
+/// Largest loss of gain (`−k`) a correction rescales; beyond it the gauge is set aside.
+const MAX_GAIN_LOSS: f64 = 0.5;
+
 /// Settings of the sensor pass (TOML section `[sensor]`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -232,6 +235,7 @@ pub struct SensorReport {
     /// Per gauge, the test window's RMSE with every correction, those that start in the test
     /// window too (fitted on its rows: in-sample); the report's `heldout_rmse_after` counts
     /// only the corrections that start before it (output units; `None` without a test window).
+    #[serde(default, deserialize_with = "super::stats::nan_as_null::opt_vec")]
     pub heldout_rmse_after_all_corrections: Option<Vec<f64>>,
     /// The parameter's change alarm, withheld, and why (`attribution_tests` holds the tests).
     #[serde(default)]
@@ -259,8 +263,20 @@ pub(crate) fn apply(
         let size = f.size.unwrap_or(0.0) + draw.map_or(0.0, |d| d[k] * f.size_sd.unwrap_or(0.0));
         let g = f.gauge_columns[0];
         let span = f.from_row..f.to_row.min(y.nrows());
+        if f.action == SensorAction::SetAside {
+            for i in span {
+                mask[(i, g)] = true;
+                out[(i, g)] = fill[(i, g)];
+            }
+            continue;
+        }
         match f.kind {
-            SensorKind::Gain => span.for_each(|i| out[(i, g)] /= 1.0 + size),
+            // a drawn size (`draw`) is kept from dividing by less than the loss a correction
+            // may make (`MAX_GAIN_LOSS`)
+            SensorKind::Gain => {
+                let scale = (1.0 + size).max(1.0 - MAX_GAIN_LOSS);
+                span.for_each(|i| out[(i, g)] /= scale)
+            }
             SensorKind::Offset | SensorKind::Step => span.for_each(|i| out[(i, g)] -= size),
             SensorKind::Drift => {
                 let t0 = time_h[f.from_row.min(y.nrows() - 1)];
@@ -274,12 +290,8 @@ pub(crate) fn apply(
                     out[(i, h)] = t;
                 }
             }
-            SensorKind::Stuck | SensorKind::NoiseIncrease => {
-                for i in span {
-                    mask[(i, g)] = true;
-                    out[(i, g)] = fill[(i, g)];
-                }
-            }
+            // always set aside (above)
+            SensorKind::Stuck | SensorKind::NoiseIncrease => {}
         }
     }
     (out, mask)
@@ -293,6 +305,10 @@ pub(crate) struct ScanInput<'a> {
     /// The model's prediction (mean + accepted effects), every row.
     pub fitted: &'a DMatrix<f64>,
     pub unit: &'a str,
+    /// First row a finding may start at: after selection, the end of the calibration window
+    /// (a correction there would need a new calibration, which the post-selection pass does
+    /// not make).
+    pub earliest: usize,
 }
 
 impl ScanInput<'_> {
@@ -325,6 +341,11 @@ impl ScanInput<'_> {
             unit: size.2.to_string(),
             action: match kind {
                 SensorKind::Stuck | SensorKind::NoiseIncrease => SensorAction::SetAside,
+                // a gauge that lost more than half its signal is not rescaled by `1/(1+k)`
+                // (the noise would be amplified with it): set aside
+                SensorKind::Gain if size.0.is_some_and(|k| k < -MAX_GAIN_LOSS) => {
+                    SensorAction::SetAside
+                }
                 _ => SensorAction::Corrected,
             },
             source: source.into(),
@@ -378,16 +399,28 @@ pub(crate) fn from_verdict(inp: &ScanInput<'_>, verdict: &AdequacyReport) -> Vec
         .collect()
 }
 
-/// Per gauge, the white-noise variance of the residual from first differences.
-fn noise_var(r: &DMatrix<f64>) -> Vec<f64> {
+/// Per gauge, the variance the scans' scores divide by: the residual's robust long-run
+/// variance (AR(1); [`numerics::changepoint::NoiseScale::robust`]), because a model's misfit
+/// leaves the residual autocorrelated and a least-squares fit of one size over many rows
+/// varies with the long-run variance, not the white-noise one; the white-noise variance from
+/// first differences when the long-run scale cannot be estimated, and never below it. Over
+/// `rows`: a change inside them would read as autocorrelation and inflate the scale.
+fn noise_var(r: &DMatrix<f64>, rows: std::ops::Range<usize>) -> Vec<f64> {
     (0..r.ncols())
         .map(|g| {
-            let col: Vec<f64> = r.column(g).iter().copied().collect();
-            numerics::robust::noise_sd_from_differences(&col)
-                .max(1e-9)
-                .powi(2)
+            let col: Vec<f64> = rows.clone().map(|i| r[(i, g)]).collect();
+            let white = numerics::robust::noise_sd_from_differences(&col).max(1e-9);
+            let long =
+                numerics::changepoint::NoiseScale::robust(&col).map_or(white, |s| s.long_run_sd);
+            long.max(white).powi(2)
         })
         .collect()
+}
+
+/// The rows a change starting at `from` is judged against: those before it, when there are at
+/// least a quarter of the record's rows, else every row.
+fn quiet_rows(from: usize, n: usize) -> std::ops::Range<usize> {
+    if 4 * from >= n { 0..from } else { 0..n }
 }
 
 /// Channel exchanges: for every pair `(a, b)` and onset `τ`, the decrease of the residual sum
@@ -401,7 +434,7 @@ pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<Sens
     if n < 2 * cfg.min_span_rows || k < 2 {
         return vec![];
     }
-    let var = noise_var(r);
+    let var = noise_var(r, 0..r.nrows());
     let pairs = (k * (k - 1) / 2) as f64;
     let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * pairs.ln();
     let mut found: Vec<(f64, usize, usize, usize)> = vec![];
@@ -469,13 +502,13 @@ pub(crate) fn gain_scan(
     if n < 2 * cfg.min_span_rows {
         return vec![];
     }
-    let var = noise_var(r);
+    let var = noise_var(r, 0..r.nrows());
     let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * (k as f64).ln();
     let mut out = vec![];
     for g in (0..k).filter(|g| !skip.contains(g)) {
         let (mut mr, mut mm) = (0.0, 0.0);
         let mut best: Option<(f64, usize, f64, f64)> = None;
-        for i in (cfg.min_span_rows..n).rev() {
+        for i in (cfg.min_span_rows.max(inp.earliest)..n).rev() {
             mr += m[(i, g)] * r[(i, g)];
             mm += m[(i, g)] * m[(i, g)];
             if n - i < cfg.min_span_rows || mm <= 0.0 {
@@ -602,8 +635,11 @@ pub(crate) fn noise_scan(
                 .changes
                 .get(j + 1)
                 .map_or(n, |next| next.first_row_after + 1);
-            if explained_by_gain(inp, g, (from, to), cfg) {
-                // a change of gain, not of noise: the gain scan after selection judges it
+            if explained_by_gain(inp, g, (from, to), cfg)
+                || moves_with_the_load(inp, g, from, to, cfg)
+            {
+                // a change of gain, or the model's misfit growing as the load moves faster,
+                // not of the gauge's noise (the gain scan after selection judges a gain)
                 continue;
             }
             let ratio = (0.5 * c.size).exp();
@@ -624,6 +660,30 @@ pub(crate) fn noise_scan(
     let gauges: std::collections::BTreeSet<usize> =
         out.iter().map(|f| f.gauge_columns[0]).collect();
     Ok(if gauges.len() >= 3 { vec![] } else { out })
+}
+
+/// Whether the residual's first differences grew on `from..to` because the gauge's fitted
+/// strain moves faster there (a model misfit that scales with the load's motion): the growth
+/// of the residual differences' robust sd over the rows before, divided by the same growth
+/// of the fitted strain's differences, stays below `noise_ratio`.
+fn moves_with_the_load(
+    inp: &ScanInput<'_>,
+    g: usize,
+    from: usize,
+    to: usize,
+    cfg: &SensorConfig,
+) -> bool {
+    use numerics::robust::noise_sd_from_differences as sd_of;
+    let col = |m: &DMatrix<f64>, rows: std::ops::Range<usize>| -> Vec<f64> {
+        rows.map(|i| m[(i, g)]).collect()
+    };
+    let (r, m) = (inp.residual, inp.fitted);
+    let (r0, r1) = (sd_of(&col(r, 0..from)), sd_of(&col(r, from..to)));
+    let (m0, m1) = (sd_of(&col(m, 0..from)), sd_of(&col(m, from..to)));
+    if !(r0 > 0.0 && m0 > 0.0 && m1 > 0.0) {
+        return false;
+    }
+    (r1 / r0) / (m1 / m0).max(1.0) < cfg.noise_ratio
 }
 
 /// A change of a gauge's gain from row `from` looks like a noise increase in the residual's
@@ -677,7 +737,7 @@ pub(crate) fn attribute(
 ) -> (AttributionTest, Option<SensorFinding>) {
     let (r, m) = (inp.residual, inp.fitted);
     let (n, k) = (r.nrows(), r.ncols());
-    let var = noise_var(r);
+    let var = noise_var(r, quiet_rows(from, n));
     let rows = from..n;
     let none: f64 = (0..k)
         .map(|g| rows.clone().map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
@@ -797,7 +857,11 @@ pub(crate) fn attribute(
         penalty,
         verdict: verdict.into(),
     };
-    let finding = best.2.filter(|_| sensor_wins).map(|f| refine_onset(inp, f));
+    let finding = best
+        .2
+        .filter(|_| sensor_wins)
+        .map(|f| refine_onset(inp, f))
+        .filter(|f| f.from_row >= inp.earliest);
     let finding = finding.map(|mut f| {
         f.evidence = format!(
             "{subject} from day {:.2}: {} explains the change better than a change of the parameter (residual sum of squares {:.0} + penalty {penalty:.1} against {:.0} noise variances)",
@@ -835,7 +899,8 @@ fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
     if regressor(f.from_row, f.from_row).is_none() {
         return f;
     }
-    let near = |i: usize| (t[i] - t[f.from_row]).abs() <= ONSET_SEARCH_DAYS * 24.0;
+    let near =
+        |i: usize| i >= inp.earliest && (t[i] - t[f.from_row]).abs() <= ONSET_SEARCH_DAYS * 24.0;
     let fit = |from: usize| {
         let (xr, xx) = (from..n).fold((0.0, 0.0), |(a, b), i| {
             let x = regressor(i, from).unwrap_or(0.0);
@@ -850,7 +915,7 @@ fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
     let Some((from, (_, xr, xx))) = best.filter(|b| b.1.2 > 0.0) else {
         return f;
     };
-    let var = noise_var(r)[g];
+    let var = noise_var(r, quiet_rows(f.from_row, n))[g];
     SensorFinding {
         from_row: from,
         from_day: inp.day(from),
@@ -913,9 +978,20 @@ mod tests {
         }
     }
 
-    /// A deterministic "noise" of sd about 1 (no random draws needed).
+    /// White noise of sd 1, a pure function of the cell (a hash turned into a normal draw by
+    /// Box-Muller), so that the tests need no random state. A deterministic sinusoid would not
+    /// do: the scans read its regular swings as autocorrelation.
     fn wiggle(i: usize, g: usize) -> f64 {
-        ((i * 7 + g * 13) as f64 * 1.618).sin() * 1.4
+        let u = |salt: u64| {
+            let mut z = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ (g as u64 + 1).wrapping_mul(0xBF58_476D_1CE4_E5B9)
+                ^ salt;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (-2.0 * u(1).ln()).sqrt() * (2.0 * std::f64::consts::PI * u(2)).cos()
     }
 
     #[test]
@@ -939,6 +1015,7 @@ mod tests {
             residual: &r,
             fitted: &fitted,
             unit: "microstrain",
+            earliest: 0,
         };
         let f = exchange_scan(&inp, &SensorConfig::default());
         assert_eq!(f.len(), 1, "{f:?}");
@@ -993,6 +1070,7 @@ mod tests {
             residual: &zeros,
             fitted: &rec.y,
             unit: "microstrain",
+            earliest: 0,
         };
         let f = from_verdict(&inp, &verdict);
         let got: Vec<(SensorKind, usize, usize)> = f
@@ -1026,6 +1104,7 @@ mod tests {
             residual: &y,
             fitted: &fitted,
             unit: "microstrain",
+            earliest: 0,
         };
         let f = stuck_scan(&inp, &SensorConfig::default());
         assert_eq!(f.len(), 1);
@@ -1055,6 +1134,7 @@ mod tests {
             residual: &r,
             fitted: &fitted,
             unit: "microstrain",
+            earliest: 0,
         };
         let (t, f) = attribute("gap alarm", &inp, &sens, from);
         assert_eq!(t.verdict, "structure", "{t:?}");

@@ -369,3 +369,19 @@ mod tests {
         assert!((b[(0, 0)] - 3.0).abs() < 1e-10 && (b[(1, 0)] + 0.5).abs() < 1e-10);
     }
 }
+
+/// Reading back per-gauge errors that JSON holds as `null` where the value is `NaN` (a gauge
+/// with no row left to measure it on): serde_json writes a non-finite number as `null`.
+pub(crate) mod nan_as_null {
+    use serde::{Deserialize, Deserializer};
+
+    pub(crate) fn vec<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
+        let v: Vec<Option<f64>> = Vec::deserialize(d)?;
+        Ok(v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
+    }
+
+    pub(crate) fn opt_vec<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<f64>>, D::Error> {
+        let v: Option<Vec<Option<f64>>> = Option::deserialize(d)?;
+        Ok(v.map(|v| v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect()))
+    }
+}
