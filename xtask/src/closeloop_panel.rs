@@ -62,9 +62,12 @@ pub struct PanelArgs {
     /// Onsets, comma separated: early (day 5), middle (day 30), late (day 50).
     #[arg(long, default_value = "early,middle,late")]
     onsets: String,
-    /// Seeds per cell (validation seeds 1000, 1001, ...).
+    /// Seeds per cell (validation seeds `first_seed`, `first_seed + 1`, ...).
     #[arg(long, default_value_t = 5)]
     seeds: u64,
+    /// First seed of each cell.
+    #[arg(long, default_value_t = 1000)]
+    first_seed: u64,
     /// Clean records (no effect) for the false-finding count.
     #[arg(long, default_value_t = 20)]
     clean: u64,
@@ -121,7 +124,12 @@ pub fn run(args: &PanelArgs) -> Result<()> {
         for magnitude in args.magnitudes.split(',') {
             for onset in args.onsets.split(',') {
                 for k in 0..args.seeds {
-                    plan.push((kind.clone(), magnitude.into(), onset.into(), 1000 + k));
+                    plan.push((
+                        kind.clone(),
+                        magnitude.into(),
+                        onset.into(),
+                        args.first_seed + k,
+                    ));
                 }
             }
         }

@@ -160,7 +160,7 @@ fn sensor_section(s: &mut String, r: &CloseLoopReport) {
             t(&sr.theta_with_corrections),
             sr.set_aside_cells,
             if sr.fitted_on_test_rows {
-                " A correction was fitted on rows of the test window: for its gauge and span the error after is not out of sample."
+                " A correction reaches into the test window and was dated and sized on every row, the test window's included: for its gauge and span the error after is not fully out of sample."
             } else {
                 ""
             }

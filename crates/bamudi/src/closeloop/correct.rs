@@ -15,6 +15,8 @@ use rand::{RngExt, SeedableRng, rngs::StdRng};
 pub(super) struct PrePass {
     pub findings: Vec<SensorFinding>,
     pub tests: Vec<AttributionTest>,
+    /// One-gauge findings not applied: other gauges changed at the same time.
+    pub coincident: Vec<SensorFinding>,
 }
 
 /// The findings of the first calibration: its verdict's gains and offsets, stuck gauges,
@@ -35,22 +37,24 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
     };
     let mut sens: Option<DMatrix<f64>> = None;
     let mut tests = vec![];
-    let mut confirmed = |inp: &ScanInput<'_>, f: &SensorFinding| -> Result<bool> {
+    let mut confirmed = |inp: &ScanInput<'_>, f: &SensorFinding| -> Result<Option<SensorFinding>> {
         if sens.is_none() {
             sens = Some(sensor::sensitivity(st.model.as_ref(), lp.x)?);
         }
         let subject = format!("{} {}", f.gauges.join("<->"), f.kind.name());
         let (test, found) = sensor::attribute(&subject, inp, sens.as_ref().unwrap(), f.from_row);
         log::info!("{subject} from day {:.2}: {}", f.from_day, test.verdict);
-        // the test's own best sensor hypothesis must be this finding
-        let sensor = found.is_some_and(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns);
+        // the test's own best sensor hypothesis must be this finding (re-dated by the test)
         tests.push(test);
-        Ok(sensor)
+        Ok(found.filter(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns))
     };
     let mut found = sensor::stuck_scan(&inp, cfg);
     let taken = |f: &[SensorFinding], g: usize| f.iter().any(|x| x.gauge_columns.contains(&g));
     for e in sensor::exchange_scan(&inp, cfg) {
-        if !e.gauge_columns.iter().any(|&g| taken(&found, g)) && confirmed(&inp, &e)? {
+        if e.gauge_columns.iter().any(|&g| taken(&found, g)) {
+            continue;
+        }
+        if let Some(e) = confirmed(&inp, &e)? {
             found.push(e);
         }
     }
@@ -74,12 +78,28 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
         .flat_map(|f| f.gauge_columns.iter().copied())
         .collect();
     found.extend(sensor::noise_scan(&inp, cfg, &skip)?);
+    // changes of gain from inside the calibration or selection windows, corrected before the
+    // calibration and the effect library see them (a library effect such as a time-varying gap
+    // would otherwise absorb one gauge's gain change as a change of the structure)
+    let skip: Vec<usize> = found
+        .iter()
+        .flat_map(|f| f.gauge_columns.iter().copied())
+        .collect();
+    let mut gains = vec![];
+    for cand in sensor::gain_scan(&inp, cfg, &skip) {
+        if let Some(f) = confirmed(&inp, &cand)? {
+            gains.push(f);
+        }
+    }
+    let (gains, coincident) = one_gauge_at_a_time(gains);
+    found.extend(gains);
     for f in &found {
         log::info!("sensor finding: {}", f.describe());
     }
     Ok(PrePass {
         findings: found,
         tests,
+        coincident,
     })
 }
 
@@ -117,7 +137,11 @@ pub(super) fn post_pass(
     residual: DMatrix<f64>,
     pre: PrePass,
 ) -> Result<PostPass> {
-    let PrePass { findings, tests } = pre;
+    let PrePass {
+        findings,
+        tests,
+        coincident,
+    } = pre;
     let mask0 = sensor::apply(&findings, lp.y, &st.mean, &rec.time_h, None).1;
     let mut post = PostPass {
         y: lp.y.clone(),
@@ -129,7 +153,7 @@ pub(super) fn post_pass(
         findings,
         tests,
         withheld_gap_alarm: None,
-        coincident: vec![],
+        coincident,
     };
     zero_masked(&mut post.residual, &post.mask);
     let (events, track) = super::whole_record(lp, rec, &post.st, &post.residual, &post.mask)?;
@@ -145,7 +169,7 @@ pub(super) fn post_pass(
     post.tests.extend(tests);
     added.extend(gains);
     let (mut added, coincident) = one_gauge_at_a_time(added);
-    post.coincident = coincident;
+    post.coincident.extend(coincident);
     if !added.is_empty() {
         apply_more(lp, rec, &mut post, &mut added)?;
     }

@@ -382,6 +382,7 @@ pub fn close_loop_with(
         false => correct::PrePass {
             findings: vec![],
             tests: vec![],
+            coincident: vec![],
         },
     };
     let findings = &pre.findings;
@@ -846,7 +847,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         fitted_on_test_rows: post
             .findings
             .iter()
-            .any(|f| f.source != "adequacy verdict" && f.from_row >= lp.sel.len()),
+            .any(|f| f.source != "adequacy verdict" && f.to_row > lp.sel.len()),
         findings: post.findings.clone(),
         theta_without_corrections: None,
         heldout_rmse_after_all_corrections: rmse_all_corrections,

@@ -229,8 +229,10 @@ pub struct SensorReport {
     pub theta_without_corrections: Option<super::ThetaSummary>,
     /// `θ` with them (the loop's `theta_after`).
     pub theta_with_corrections: Option<super::ThetaSummary>,
-    /// Whether a correction was fitted on rows of the test window (its error after is then
-    /// not out of sample for that gauge and span).
+    /// Whether a correction's span reaches into the test window while the scan that found it
+    /// dated and sized it on every row, the test window's included (every finding but the
+    /// adequacy verdict's, which reads the calibration's rows only): the error after is then
+    /// not fully out of sample for that gauge and span.
     pub fitted_on_test_rows: bool,
     /// Per gauge, the test window's RMSE with every correction, those that start in the test
     /// window too (fitted on its rows: in-sample); the report's `heldout_rmse_after` counts

@@ -48,12 +48,14 @@ fn a_channel_exchange_is_undone_and_raises_no_gap_alarm() {
             r.alarms
         );
         assert!(holds(&r, 90.0), "{:?}", r.theta_after);
-        // the error with every correction; for the exchange in the test window it is fitted
-        // on test rows (`fitted_on_test_rows`), so it is not out of sample there
+        // the error with every correction. Both exchanges run into the test window and the
+        // exchange scan reads every row, so the report must say that the error after is not
+        // fully out of sample (`fitted_on_test_rows`); the first version of this test expected
+        // it only for the exchange that starts in the test window, which understated the leak
         let all = s.heldout_rmse_after_all_corrections.as_ref().unwrap();
         let total = (all.iter().map(|v| v * v).sum::<f64>() / all.len() as f64).sqrt();
         assert!(total < 1.5, "{all:?}");
-        assert_eq!(s.fitted_on_test_rows, at >= 864);
+        assert!(s.fitted_on_test_rows);
         if at < 648 {
             assert!(
                 r.heldout_rmse_total_after < 1.5,
