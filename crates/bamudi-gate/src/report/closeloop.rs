@@ -103,6 +103,55 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
     );
 }
 
+/// The sensor findings' table and the gap with and without the corrections.
+fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
+    let _ = writeln!(
+        s,
+        "| gauge(s) | kind | action | fitted size (± sd) | span (days) | found by | evidence |\n|---|---|---|---|---|---|---|"
+    );
+    for f in &sr.findings {
+        let size = match (f.size, f.size_sd) {
+            (Some(v), Some(sd)) => format!("{v:+.4} ± {sd:.4} {}", f.unit),
+            (Some(v), None) => format!("{v:+.4} {}", f.unit),
+            _ => "–".into(),
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {size} | {:.2} – {:.2} | {} | {} |",
+            f.gauges.join(" <-> "),
+            f.kind.name(),
+            match f.action {
+                bamudi::closeloop::SensorAction::Corrected => "corrected",
+                bamudi::closeloop::SensorAction::SetAside => "set aside",
+            },
+            f.from_day,
+            f.to_day,
+            f.source,
+            f.evidence
+        );
+    }
+    let t = |x: &Option<bamudi::closeloop::ThetaSummary>| {
+        x.map_or("–".into(), |x| {
+            format!(
+                "{:.2} ± {:.2} (95 %: {:.2} – {:.2})",
+                x.mean, x.sd, x.ci95.0, x.ci95.1
+            )
+        })
+    };
+    let _ = writeln!(
+        s,
+        "\n| gap θ (in) | value |\n|---|---|\n| without the sensor corrections | {} |\n| with them | {} |\n\n{} cells set aside (left out of every error above).{}\n",
+        t(&sr.theta_without_corrections),
+        t(&sr.theta_with_corrections),
+        sr.set_aside_cells,
+        if sr.fitted_on_test_rows {
+            " A correction reaches into the test window and was dated and sized on every row, the test window's included: for its gauge and span the error after is not fully out of sample."
+        } else {
+            ""
+        }
+    );
+}
+
 /// The sensor findings: what was corrected or set aside, from when, with the fitted size, and
 /// the gap with and without the corrections; then the structure-or-sensor tests.
 fn sensor_section(s: &mut String, r: &CloseLoopReport) {
@@ -120,51 +169,7 @@ fn sensor_section(s: &mut String, r: &CloseLoopReport) {
     }
     let _ = writeln!(s, "## Sensor findings\n");
     if !sr.findings.is_empty() {
-        let _ = writeln!(
-            s,
-            "| gauge(s) | kind | action | fitted size (± sd) | span (days) | found by | evidence |\n|---|---|---|---|---|---|---|"
-        );
-        for f in &sr.findings {
-            let size = match (f.size, f.size_sd) {
-                (Some(v), Some(sd)) => format!("{v:+.4} ± {sd:.4} {}", f.unit),
-                (Some(v), None) => format!("{v:+.4} {}", f.unit),
-                _ => "–".into(),
-            };
-            let _ = writeln!(
-                s,
-                "| {} | {} | {} | {size} | {:.2} – {:.2} | {} | {} |",
-                f.gauges.join(" <-> "),
-                f.kind.name(),
-                match f.action {
-                    bamudi::closeloop::SensorAction::Corrected => "corrected",
-                    bamudi::closeloop::SensorAction::SetAside => "set aside",
-                },
-                f.from_day,
-                f.to_day,
-                f.source,
-                f.evidence
-            );
-        }
-        let t = |x: &Option<bamudi::closeloop::ThetaSummary>| {
-            x.map_or("–".into(), |x| {
-                format!(
-                    "{:.2} ± {:.2} (95 %: {:.2} – {:.2})",
-                    x.mean, x.sd, x.ci95.0, x.ci95.1
-                )
-            })
-        };
-        let _ = writeln!(
-            s,
-            "\n| gap θ (in) | value |\n|---|---|\n| without the sensor corrections | {} |\n| with them | {} |\n\n{} cells set aside (left out of every error above).{}\n",
-            t(&sr.theta_without_corrections),
-            t(&sr.theta_with_corrections),
-            sr.set_aside_cells,
-            if sr.fitted_on_test_rows {
-                " A correction reaches into the test window and was dated and sized on every row, the test window's included: for its gauge and span the error after is not fully out of sample."
-            } else {
-                ""
-            }
-        );
+        findings_table(s, sr);
     }
     if !sr.attribution_tests.is_empty() {
         let _ = writeln!(

@@ -5,7 +5,9 @@
 
 use super::record::MeasuredRecord;
 use super::search::{Loop, State};
-use super::sensor::{self, AttributionTest, ScanInput, SensorFinding, SensorKind, WithheldAlarm};
+use super::sensor::{
+    self, AttributionTest, ScanInput, SensorFinding, SensorKind, SensorReport, WithheldAlarm,
+};
 use super::{EventScan, ThetaSummary, ThetaTrack};
 use crate::error::Result;
 use nalgebra::DMatrix;
@@ -173,11 +175,21 @@ pub(super) fn post_pass(
     if !added.is_empty() {
         apply_more(lp, rec, &mut post, &mut added)?;
     }
-    // the gap alarm guard. A change the sensor side explains better is corrected as that
-    // sensor fault and the track re-run; if the corrected track still alarms, the change is
-    // tested again: a second sensor verdict withholds the alarm (reported, never silently
-    // dropped), a structure verdict lets it stand. An alarm whose change the residual does
-    // not show at all (`unsupported`) is withheld at once.
+    gap_alarm_guard(lp, rec, &mut post, &sens)?;
+    Ok(post)
+}
+
+/// The gap alarm guard. A change the sensor side explains better is corrected as that
+/// sensor fault and the track re-run; if the corrected track still alarms, the change is
+/// tested again: a second sensor verdict withholds the alarm (reported, never silently
+/// dropped), a structure verdict lets it stand. An alarm whose change the residual does
+/// not show at all (`unsupported`) is withheld at once.
+fn gap_alarm_guard(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &mut PostPass,
+    sens: &DMatrix<f64>,
+) -> Result<()> {
     for round in 0..2 {
         let Some(alarm) = post.track.as_ref().and_then(|t| t.alarm.clone()) else {
             break;
@@ -189,7 +201,7 @@ pub(super) fn post_pass(
             .unwrap_or(rec.len() - 1);
         // the residual the track reads: a change of the parameter the loop already fitted (a
         // time-varying gap) is put back, so that the test sees the change the alarm dates
-        let residual = track_residual(lp, &post)?;
+        let residual = track_residual(lp, post)?;
         let fitted = &post.y - &residual;
         let inp = ScanInput {
             rec,
@@ -198,7 +210,7 @@ pub(super) fn post_pass(
             unit: &lp.cfg.output_unit,
             earliest: cal_end(lp),
         };
-        let (test, finding) = sensor::attribute("gap alarm", &inp, &sens, from);
+        let (test, finding) = sensor::attribute("gap alarm", &inp, sens, from);
         log::info!(
             "gap alarm on day {:.2}: {} ({})",
             alarm.day,
@@ -233,11 +245,11 @@ pub(super) fn post_pass(
                 }
                 break;
             }
-            (Some(f), None) if round == 0 => apply_more(lp, rec, &mut post, &mut vec![f])?,
+            (Some(f), None) if round == 0 => apply_more(lp, rec, post, &mut vec![f])?,
             _ => break,
         }
     }
-    Ok(post)
+    Ok(())
 }
 
 /// Sensor findings from the scan's changes of level on one gauge alone, after the calibration
@@ -526,4 +538,53 @@ pub(super) fn out_of_sample(
     let mut r = &y - &fitted;
     zero_masked(&mut r, &mask);
     (r, mask)
+}
+
+/// The sensor pass's part of the report: the findings and tests, the test window's error with
+/// every correction, and `θ` with and without the corrections (`None` when the pass is off).
+pub(super) fn report(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &PostPass,
+    theta_after: ThetaSummary,
+) -> Result<Option<SensorReport>> {
+    if !lp.cfg.sensor.enabled {
+        return Ok(None);
+    }
+    let rmse_all_corrections =
+        (!lp.test.is_empty()).then(|| sensor::rmse_unmasked(&post.residual, lp.test, &post.mask));
+    Ok(Some(SensorReport {
+        set_aside_cells: post.mask.iter().filter(|m| **m).count(),
+        attribution_tests: post.tests.clone(),
+        theta_with_corrections: (!post.findings.is_empty()).then_some(theta_after),
+        // every finding but the verdict's is dated and sized on every row
+        fitted_on_test_rows: post
+            .findings
+            .iter()
+            .any(|f| f.source != "adequacy verdict" && f.to_row > lp.sel.len()),
+        findings: post.findings.clone(),
+        theta_without_corrections: theta_without(&lp.with_y(&post.y), rec, post)?,
+        heldout_rmse_after_all_corrections: rmse_all_corrections,
+        withheld_gap_alarm: post.withheld_gap_alarm.clone(),
+        coincident_findings: post.coincident.clone(),
+    }))
+}
+
+/// The test window's RMSE per gauge after the loop, with only the corrections that start
+/// before it ([`out_of_sample`]), and its adequacy check replacing the last of `checks`
+/// (`rmse`, the selection's own figure, when there is no test window).
+pub(super) fn test_error(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &PostPass,
+    rmse: Vec<f64>,
+    checks: &mut Vec<super::Adequacy>,
+) -> Vec<f64> {
+    if lp.test.is_empty() {
+        return rmse;
+    }
+    let (r_oos, mask_oos) = out_of_sample(rec, post, lp.sel.len());
+    checks.pop();
+    checks.extend(super::test_window(lp, &r_oos, &post.st.var));
+    sensor::rmse_unmasked(&r_oos, lp.test, &mask_oos)
 }

@@ -656,6 +656,23 @@ fn with_alarms(
     }
 }
 
+/// The candidate features by name, with their columns (for the plots).
+fn feature_columns(lp: &Loop<'_>) -> Vec<(String, Vec<f64>)> {
+    let f = lp.feats;
+    f.names
+        .iter()
+        .cloned()
+        .zip(f.cols.iter().cloned())
+        .collect()
+}
+
+/// The RMSE over every gauge from per-gauge RMSEs; a gauge set aside over the whole error
+/// window has no error (`NaN`) and is left out.
+fn rmse_total(v: &[f64]) -> f64 {
+    let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
+    (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
+}
+
 /// The conclusion with the sensor findings first: what was corrected or set aside is said
 /// before anything else, and "no missing effect found" is not said when something was.
 fn with_sensor(conclusion: String, sensor: Option<&SensorReport>) -> String {
@@ -824,58 +841,16 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         checks: mut checks_after,
     } = final_state(lp, st)?;
     let post = correct::post_pass(lp, rec, st, residual, pre)?;
-    let rmse_after = match lp.test.is_empty() {
-        true => rmse,
-        false => {
-            // the test window's check on the corrected residual
-            let (r_oos, mask_oos) = correct::out_of_sample(rec, &post, lp.sel.len());
-            checks_after.pop();
-            checks_after.extend(test_window(lp, &r_oos, &post.st.var));
-            sensor::rmse_unmasked(&r_oos, lp.test, &mask_oos)
-        }
-    };
-    let rmse_all_corrections =
-        (!lp.test.is_empty()).then(|| sensor::rmse_unmasked(&post.residual, lp.test, &post.mask));
+    let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after);
     let (events, theta_track) = (post.events.clone(), post.track.clone());
     let (theta_after, basis) = theta_after(&post.st, theta_track.as_ref());
-    let lp_c = lp.with_y(&post.y);
-    let (theta_after, effect_sd) = correct::propagate(&lp_c, rec, &post, theta_after)?;
-    let sensor_report = lp.cfg.sensor.enabled.then(|| SensorReport {
-        set_aside_cells: post.mask.iter().filter(|m| **m).count(),
-        attribution_tests: post.tests.clone(),
-        theta_with_corrections: (!post.findings.is_empty()).then_some(theta_after),
-        fitted_on_test_rows: post
-            .findings
-            .iter()
-            .any(|f| f.source != "adequacy verdict" && f.to_row > lp.sel.len()),
-        findings: post.findings.clone(),
-        theta_without_corrections: None,
-        heldout_rmse_after_all_corrections: rmse_all_corrections,
-        withheld_gap_alarm: post.withheld_gap_alarm.clone(),
-        coincident_findings: post.coincident.clone(),
-    });
-    let sensor_report = match sensor_report {
-        Some(mut s) => {
-            s.theta_without_corrections = correct::theta_without(&lp_c, rec, &post)?;
-            Some(s)
-        }
-        None => None,
-    };
+    let (theta_after, effect_sd) =
+        correct::propagate(&lp.with_y(&post.y), rec, &post, theta_after)?;
+    let sensor_report = correct::report(lp, rec, &post, theta_after)?;
     let conclusion = with_sensor(conclusion, sensor_report.as_ref());
-    let conclusion = with_alarms(
-        conclusion,
-        events.as_ref(),
-        theta_track.as_ref(),
-        &lp.cfg.output_unit,
-    );
-    let st = post.st;
-    let r_final = post.residual;
-    // a gauge set aside over the whole error window has no error (NaN): left out
-    let total = |v: &[f64]| {
-        let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-        (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
-    };
-    let w = window_fields(lp, rec);
+    let unit = &lp.cfg.output_unit;
+    let conclusion = with_alarms(conclusion, events.as_ref(), theta_track.as_ref(), unit);
+    let (st, r_final, w) = (post.st, post.residual, window_fields(lp, rec));
     let report = CloseLoopReport {
         file: rec.file.clone(),
         gauge_names: rec.gauge_names.clone(),
@@ -892,8 +867,8 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         error_window: w.error_window,
         noise_sd_estimate: before.noise_sd,
         effects: st.effects.iter().map(|e| e.report.clone()).collect(),
-        heldout_rmse_total_before: total(&before.rmse),
-        heldout_rmse_total_after: total(&rmse_after),
+        heldout_rmse_total_before: rmse_total(&before.rmse),
+        heldout_rmse_total_after: rmse_total(&rmse_after),
         heldout_rmse_before: before.rmse,
         heldout_rmse_after: rmse_after,
         theta_before: before.theta,
@@ -905,7 +880,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         conclusion,
         model_adequacy_before: before.adequacy,
         model_adequacy_after: st.model.adequacy().cloned(),
-        alarms: alarm_summaries(events.as_ref(), theta_track.as_ref(), &lp.cfg.output_unit),
+        alarms: alarm_summaries(events.as_ref(), theta_track.as_ref(), unit),
         events,
         theta_track,
         wall_time_s: 0.0,
@@ -918,13 +893,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         residual_before: before.residual,
         residual_after: r_final,
         heldout_rows: lp.error_rows().to_vec(),
-        features: lp
-            .feats
-            .names
-            .iter()
-            .cloned()
-            .zip(lp.feats.cols.iter().cloned())
-            .collect(),
+        features: feature_columns(lp),
         effect_plot_covariates: st
             .effects
             .iter()

@@ -34,6 +34,14 @@ use serde::{Deserialize, Serialize};
 const MAX_GAIN_LOSS: f64 = 0.5;
 
 /// Settings of the sensor pass (TOML section `[sensor]`).
+///
+/// ```
+/// use bamudi::closeloop::{CloseLoopConfig, SensorConfig};
+/// let cfg: CloseLoopConfig = toml::from_str("[sensor]\nnoise_ratio = 3.0\n").unwrap();
+/// assert_eq!(cfg.sensor.noise_ratio, 3.0);
+/// assert!(cfg.sensor.enabled); // the pass runs unless `enabled = false`
+/// assert_eq!(cfg.sensor.uncertainty_draws, SensorConfig::default().uncertainty_draws);
+/// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SensorConfig {
@@ -737,114 +745,19 @@ pub(crate) fn attribute(
     sensitivity: &DMatrix<f64>,
     from: usize,
 ) -> (AttributionTest, Option<SensorFinding>) {
-    let (r, m) = (inp.residual, inp.fitted);
-    let (n, k) = (r.nrows(), r.ncols());
-    let var = noise_var(r, quiet_rows(from, n));
-    let rows = from..n;
-    let none: f64 = (0..k)
-        .map(|g| rows.clone().map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
-        .sum();
-    // structure: one Δ, weighted least squares over every gauge, as a step of the parameter
-    // from `from` or a ramp from it (a gap that opens suddenly or grows)
-    let t0 = inp.rec.time_h[from];
-    let structure_fit = |shape: &dyn Fn(usize) -> f64| {
-        let (mut jr, mut jj) = (0.0, 0.0);
-        for g in 0..k {
-            for i in rows.clone() {
-                let j = sensitivity[(i, g)] * shape(i);
-                jr += j * r[(i, g)] / var[g];
-                jj += j * j / var[g];
-            }
-        }
-        none - if jj > 0.0 { jr * jr / jj } else { 0.0 }
-    };
-    let structure =
-        structure_fit(&|_| 1.0).min(structure_fit(&|i| (inp.rec.time_h[i] - t0) / 24.0));
-    // sensor: one gauge's step or gain change, or one pair's exchange
-    let mut best: (f64, String, Option<SensorFinding>) = (f64::INFINITY, String::new(), None);
-    let len = (n - from) as f64;
-    let per_day = format!("{} per day", inp.unit);
-    for g in 0..k {
-        let sum: f64 = rows.clone().map(|i| r[(i, g)]).sum();
-        let step = none - sum * sum / len / var[g];
-        let (mr, mm) = rows.clone().fold((0.0, 0.0), |(a, b), i| {
-            let truth = m[(i, g)];
-            (a + truth * r[(i, g)], b + truth * truth)
-        });
-        let gain = none - if mm > 0.0 { mr * mr / mm / var[g] } else { 0.0 };
-        // a drift from `from`: the reading's zero moves by `slope` per day
-        let (ur, uu) = rows.clone().fold((0.0, 0.0), |(a, b), i| {
-            let u = (inp.rec.time_h[i] - t0) / 24.0;
-            (a + u * r[(i, g)], b + u * u)
-        });
-        let drift = none - if uu > 0.0 { ur * ur / uu / var[g] } else { 0.0 };
-        let name = &inp.rec.gauge_names[g];
-        if drift < best.0 && uu > 0.0 {
-            let f = inp.finding(
-                SensorKind::Drift,
-                vec![g],
-                (from, n),
-                (Some(ur / uu), Some((var[g] / uu).sqrt()), &per_day),
-                "structure-or-sensor test",
-                String::new(),
-            );
-            best = (drift, format!("{name} drift"), Some(f));
-        }
-        if step < best.0 {
-            let sd = (var[g] / len).sqrt();
-            let f = inp.finding(
-                SensorKind::Step,
-                vec![g],
-                (from, n),
-                (Some(sum / len), Some(sd), inp.unit),
-                "structure-or-sensor test",
-                String::new(),
-            );
-            best = (step, format!("{name} step"), Some(f));
-        }
-        if gain < best.0 && mm > 0.0 {
-            let f = inp.finding(
-                SensorKind::Gain,
-                vec![g],
-                (from, n),
-                (Some(mr / mm), Some((var[g] / mm).sqrt()), "fraction"),
-                "structure-or-sensor test",
-                String::new(),
-            );
-            best = (gain, format!("{name} gain change"), Some(f));
-        }
-    }
-    for a in 0..k {
-        for b in a + 1..k {
-            let mut score = none;
-            for i in rows.clone() {
-                let (ya, yb) = (r[(i, a)] + m[(i, a)], r[(i, b)] + m[(i, b)]);
-                score -= r[(i, a)].powi(2) / var[a] + r[(i, b)].powi(2) / var[b];
-                score += (yb - m[(i, a)]).powi(2) / var[a] + (ya - m[(i, b)]).powi(2) / var[b];
-            }
-            if score < best.0 {
-                let f = inp.finding(
-                    SensorKind::ChannelExchange,
-                    vec![a, b],
-                    (from, n),
-                    (None, None, ""),
-                    "structure-or-sensor test",
-                    String::new(),
-                );
-                let names = &inp.rec.gauge_names;
-                best = (
-                    score,
-                    format!("{}<->{} exchange", names[a], names[b]),
-                    Some(f),
-                );
-            }
-        }
-    }
+    let c = Change::new(inp, from);
+    // structure: one Δ over every gauge, a step of the parameter from `from` or a ramp from it
+    // (a gap that opens suddenly or grows)
+    let structure = c
+        .all_gauges(|i, g| sensitivity[(i, g)])
+        .min(c.all_gauges(|i, g| sensitivity[(i, g)] * c.days(i)));
+    let Best(sensor, hypothesis, best) = best_sensor(&c);
     // each side pays 2 ln of the number of hypotheses it chose among (the structure 2)
+    let k = inp.residual.ncols();
     let m_hyp = (3 * k + k * (k - 1) / 2) as f64;
     let penalty = 2.0 * (m_hyp.ln() - 2f64.ln());
-    let sensor_wins = best.0 + penalty < structure;
-    let verdict = match (sensor_wins, none - structure >= CHANGE_EVIDENCE) {
+    let sensor_wins = sensor + penalty < structure;
+    let verdict = match (sensor_wins, c.none - structure >= CHANGE_EVIDENCE) {
         (true, _) => "sensor",
         (false, true) => "structure",
         (false, false) => "unsupported",
@@ -852,26 +765,179 @@ pub(crate) fn attribute(
     let test = AttributionTest {
         subject: subject.into(),
         from_day: inp.day(from),
-        none,
+        none: c.none,
         structure,
-        sensor: best.0,
-        sensor_hypothesis: best.1.clone(),
+        sensor,
+        sensor_hypothesis: hypothesis.clone(),
         penalty,
         verdict: verdict.into(),
     };
     let finding = best
-        .2
         .filter(|_| sensor_wins)
         .map(|f| refine_onset(inp, f))
-        .filter(|f| f.from_row >= inp.earliest);
-    let finding = finding.map(|mut f| {
-        f.evidence = format!(
-            "{subject} from day {:.2}: {} explains the change better than a change of the parameter (residual sum of squares {:.0} + penalty {penalty:.1} against {:.0} noise variances)",
-            test.from_day, best.1, best.0, structure
-        );
-        f
-    });
+        .filter(|f| f.from_row >= inp.earliest)
+        .map(|mut f| {
+            f.evidence = format!(
+                "{subject} from day {:.2}: {hypothesis} explains the change better than a change of the parameter (residual sum of squares {sensor:.0} + penalty {penalty:.1} against {structure:.0} noise variances)",
+                test.from_day
+            );
+            f
+        });
     (test, finding)
+}
+
+/// One tested change: the residual from row `from` on, judged against the noise variances
+/// of the rows before it; `none` is its score with no change.
+struct Change<'a, 'b> {
+    inp: &'a ScanInput<'b>,
+    var: Vec<f64>,
+    from: usize,
+    none: f64,
+}
+
+impl<'a, 'b> Change<'a, 'b> {
+    fn new(inp: &'a ScanInput<'b>, from: usize) -> Self {
+        let r = inp.residual;
+        let n = r.nrows();
+        let var = noise_var(r, quiet_rows(from, n));
+        let none = (0..r.ncols())
+            .map(|g| (from..n).map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
+            .sum();
+        Self {
+            inp,
+            var,
+            from,
+            none,
+        }
+    }
+
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.from..self.inp.residual.nrows()
+    }
+
+    /// Days from the change's start to row `i`.
+    fn days(&self, i: usize) -> f64 {
+        (self.inp.rec.time_h[i] - self.inp.rec.time_h[self.from]) / 24.0
+    }
+
+    /// The score with one size times `x(i, g)` removed from every gauge at once.
+    fn all_gauges(&self, x: impl Fn(usize, usize) -> f64) -> f64 {
+        let r = self.inp.residual;
+        let (mut xr, mut xx) = (0.0, 0.0);
+        for g in 0..r.ncols() {
+            for i in self.rows() {
+                let v = x(i, g);
+                xr += v * r[(i, g)] / self.var[g];
+                xx += v * v / self.var[g];
+            }
+        }
+        self.none - if xx > 0.0 { xr * xr / xx } else { 0.0 }
+    }
+
+    /// On gauge `g` alone, one size times `x(i)` removed: the score, the size and its sd
+    /// (`None` when `x` vanishes on the rows).
+    fn one_gauge(&self, g: usize, x: impl Fn(usize) -> f64) -> Option<(f64, f64, f64)> {
+        let r = self.inp.residual;
+        let (xr, xx) = self.rows().fold((0.0, 0.0), |(a, b), i| {
+            let v = x(i);
+            (a + v * r[(i, g)], b + v * v)
+        });
+        (xx > 0.0).then(|| {
+            (
+                self.none - xr * xr / xx / self.var[g],
+                xr / xx,
+                (self.var[g] / xx).sqrt(),
+            )
+        })
+    }
+
+    /// The score with the readings of gauges `a` and `b` exchanged back.
+    fn exchange(&self, a: usize, b: usize) -> f64 {
+        let (r, m, var) = (self.inp.residual, self.inp.fitted, &self.var);
+        let mut score = self.none;
+        for i in self.rows() {
+            let (ya, yb) = (r[(i, a)] + m[(i, a)], r[(i, b)] + m[(i, b)]);
+            score -= r[(i, a)].powi(2) / var[a] + r[(i, b)].powi(2) / var[b];
+            score += (yb - m[(i, a)]).powi(2) / var[a] + (ya - m[(i, b)]).powi(2) / var[b];
+        }
+        score
+    }
+}
+
+/// The best sensor hypothesis so far: its score, its name and its finding.
+struct Best(f64, String, Option<SensorFinding>);
+
+impl Best {
+    fn offer(&mut self, score: f64, name: String, finding: impl FnOnce() -> SensorFinding) {
+        if score < self.0 {
+            *self = Best(score, name, Some(finding()));
+        }
+    }
+}
+
+/// The best sensor hypothesis for a change: a drift, a step or a gain change on one gauge, or
+/// an exchange of one pair's readings.
+fn best_sensor(c: &Change<'_, '_>) -> Best {
+    let (inp, m) = (c.inp, c.inp.fitted);
+    let (n, k) = (m.nrows(), m.ncols());
+    let src = "structure-or-sensor test";
+    let per_day = format!("{} per day", inp.unit);
+    let mut best = Best(f64::INFINITY, String::new(), None);
+    for g in 0..k {
+        let name = &inp.rec.gauge_names[g];
+        let hypotheses = [
+            (
+                SensorKind::Drift,
+                "drift",
+                per_day.as_str(),
+                c.one_gauge(g, |i| c.days(i)),
+            ),
+            (SensorKind::Step, "step", inp.unit, c.one_gauge(g, |_| 1.0)),
+            (
+                SensorKind::Gain,
+                "gain change",
+                "fraction",
+                c.one_gauge(g, |i| m[(i, g)]),
+            ),
+        ];
+        for (kind, what, unit, fit) in hypotheses {
+            let Some((score, size, sd)) = fit else {
+                continue;
+            };
+            best.offer(score, format!("{name} {what}"), || {
+                let span = (c.from, n);
+                inp.finding(
+                    kind,
+                    vec![g],
+                    span,
+                    (Some(size), Some(sd), unit),
+                    src,
+                    String::new(),
+                )
+            });
+        }
+    }
+    for a in 0..k {
+        for b in a + 1..k {
+            let names = &inp.rec.gauge_names;
+            best.offer(
+                c.exchange(a, b),
+                format!("{}<->{} exchange", names[a], names[b]),
+                || {
+                    let none = (None, None, "");
+                    inp.finding(
+                        SensorKind::ChannelExchange,
+                        vec![a, b],
+                        (c.from, n),
+                        none,
+                        src,
+                        String::new(),
+                    )
+                },
+            );
+        }
+    }
+    best
 }
 
 /// Least decrease of the residual sum of squares (in noise variances) a change of the
