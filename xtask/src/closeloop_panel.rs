@@ -35,7 +35,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
 
-/// Every kind the panel can write into a record.
+/// Every kind the panel can write into a record; the first seven are sensor faults.
 pub const KINDS: [&str; 12] = [
     "gain",
     "offset-step",
@@ -561,16 +561,8 @@ fn score(
         "wall-flexure" => effect("generic_covariate_term", &["upper_pool"]),
         _ => r.effects.is_empty() && !sensor_any && r.alarms.is_empty(),
     };
-    let sensor_kind = [
-        "gain",
-        "offset-step",
-        "drift",
-        "exchange",
-        "stuck",
-        "dead",
-        "noise",
-    ]
-    .contains(&kind);
+    // the first seven kinds of `KINDS` are the sensor faults
+    let sensor_kind = KINDS[..7].contains(&kind);
     Score {
         kind: kind.into(),
         magnitude: magnitude.into(),
