@@ -553,7 +553,10 @@ fn score(
         "stuck" | "dead" => finding(&[SensorKind::Stuck]),
         "noise" => finding(&[SensorKind::NoiseIncrease]),
         "gap-step" | "gap-growth" => (gap_alarm || effect("time_varying_gap", &[])) && !sensor_any,
-        "lockage-lag" => effect("generic_covariate_term", &["lockage", "event"]),
+        "lockage-lag" => {
+            effect("operational_event_response", &["lockage_phase"])
+                || effect("generic_covariate_term", &["lockage"])
+        }
         "sun" => {
             effect("thermal(air_temp_f)", &[])
                 || effect("generic_covariate_term", &["daily", "air_temp"])

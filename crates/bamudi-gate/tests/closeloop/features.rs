@@ -233,3 +233,122 @@ fn both_undeclared_effects_are_named_on_an_as_built_gate() {
         assert!(named + 1 >= SEEDS.count(), "{label}: named {named} of 6");
     }
 }
+
+/// A response locked to the lock's cycle in a shape the operational term does not hold: after
+/// each return of the chamber to the lower pool (the rows where `lockage_phase` becomes 0), a
+/// pure delay `d` drawn from 1-5 h, then a triangular pulse of width `w` drawn from 4-12 h
+/// (rising over its first half, falling over its second), amplitude per gauge 1.5-4 microstrain
+/// of random sign. Neither a decay nor a delayed exponential, and no covariate carries it.
+fn cycle_locked(truth: &ToyGate, seed: u64) -> (f64, FieldRecord) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let delay = 1.0 + 4.0 * rng.random::<f64>();
+    let width = 4.0 + 8.0 * rng.random::<f64>();
+    let a = coefficients(&mut rng, 1.5, 4.0);
+    let mut rec = truth_record(truth, seed);
+    let t0 = rec.time_unix_s[0];
+    let hours: Vec<f64> = rec
+        .time_unix_s
+        .iter()
+        .map(|t| (t - t0) as f64 / 3600.0)
+        .collect();
+    let returns: Vec<f64> = (1..hours.len())
+        .filter(|&i| rec.lockage_phase[i] == 0 && rec.lockage_phase[i - 1] != 0)
+        .map(|i| hours[i])
+        .collect();
+    let pulse = |u: f64| {
+        let v = (u - delay) / (width / 2.0);
+        if (0.0..=2.0).contains(&v) {
+            1.0 - (v - 1.0).abs()
+        } else {
+            0.0
+        }
+    };
+    let shape: Vec<f64> = hours
+        .iter()
+        .map(|&t| returns.iter().map(|&s| pulse(t - s)).sum())
+        .collect();
+    add(&mut rec, |row, g| a[g] * shape[row]);
+    (delay, rec)
+}
+
+/// Seeds of the cycle-locked records: validation only. Seeds 520 and 521 were the design
+/// records of the operational term: with single response columns chosen stepwise (scales 1, 3,
+/// 9, 27 h, at most three columns) seed 520 was named but left 1.25 noise sd of error, which
+/// led to choosing whole trains over six scales; with the state's levels as candidates seed 521
+/// kept the gap 3 in off, which removed them. Seeds 522-525 then passed; this range had not
+/// been run before the design was fixed.
+const CYCLE_SEEDS: std::ops::Range<u64> = 530..536;
+
+/// Issue 58, Deliver 3: an effect locked to the lock's cycle with no formula in the library is
+/// captured by the response to the record's own operational events. Checked per record (bounds
+/// set before the first run): the loop accepts `operational_event_response` on a response to a
+/// change of `lockage_phase`, in all but at most one record; the test-window error falls to
+/// within [`NOISE_BOUND`] in every record; the gap stays within 0.5 in of 90 in. Measured:
+/// named 6 of 6, test-window rmse 1.02-1.07 (before 1.58-2.62), gap 89.70-90.28 in.
+#[test]
+fn a_response_locked_to_the_lock_cycle_is_named_by_its_events() {
+    let mut named = 0;
+    for seed in CYCLE_SEEDS {
+        let (delay, rec) = cycle_locked(&ToyGate::default(), seed);
+        let out = run_with(&rec, Selection::default());
+        summary(
+            &format!("cycle-locked seed {seed} (delay {delay:.2} h)"),
+            &out,
+        );
+        let r = &out.report;
+        let found = r.effects.iter().any(|e| {
+            e.name == "operational_event_response"
+                && e.covariates.iter().any(|c| c.contains("lockage_phase"))
+        });
+        named += usize::from(found);
+        assert!(
+            r.heldout_rmse_total_after <= NOISE_BOUND,
+            "cycle-locked seed {seed}: test-window rmse {:.3}",
+            r.heldout_rmse_total_after
+        );
+        let gap = r.theta_after.mean;
+        assert!((gap - 90.0).abs() <= 0.5, "seed {seed}: gap {gap:.2}");
+    }
+    let n = CYCLE_SEEDS.count();
+    assert!(named + 1 >= n, "named {named} of {n}");
+}
+
+/// The same records with and without the operational term in the library: what the loop does
+/// without it (a measurement for docs/closeloop.md, not a check). Measured on seeds 530-535:
+/// see the closing note of issue 58 and docs/closeloop.md.
+#[test]
+#[ignore = "a measurement for the documentation, not a check"]
+fn the_cycle_locked_records_without_the_operational_term() {
+    for seed in CYCLE_SEEDS {
+        let (delay, rec) = cycle_locked(&ToyGate::default(), seed);
+        let with = run_with(&rec, Selection::default());
+        summary(
+            &format!("cycle-locked seed {seed} (delay {delay:.2} h)"),
+            &with,
+        );
+        let without = run_without_operational(&rec);
+        summary(
+            &format!("  without the operational term, seed {seed}"),
+            &without,
+        );
+    }
+}
+
+/// The loop with the default library less the operational term.
+fn run_without_operational(rec: &FieldRecord) -> CloseLoopOutcome {
+    let gauges: Vec<&str> = rec.gauge_names.iter().map(String::as_str).collect();
+    let ingest = IngestConfig::new(&["h_up", "h_down"], &gauges);
+    let data = parse_csv(&rec.to_csv_string(), "simulated.csv", &ingest).unwrap();
+    let cfg = toy_config(&data);
+    let library: Vec<_> = bamudi::closeloop::effects::default_library(&data, &cfg)
+        .into_iter()
+        .filter(|e| e.name() != "operational_event_response")
+        .collect();
+    bamudi::closeloop::close_loop_with(
+        &data,
+        &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
+        &cfg,
+        &library,
+    )
+    .unwrap()
+}

@@ -750,15 +750,28 @@ fn track_theta(
     track::track(&input, &lp.cfg.track)
 }
 
-/// `θ` after the loop and what it refers to: the track's `θ` now when a parameter trend was
-/// accepted, else the effects' or the last calibration's.
-fn theta_after(st: &State, track: Option<&ThetaTrack>) -> (ThetaSummary, String) {
+/// `θ` after the loop, what it refers to, and whether it is the track's (then the effects'
+/// parameter uncertainty is not propagated onto it: the track's sd is its own).
+///
+/// The track's `θ` now is taken when a parameter trend was accepted, or when the track's change
+/// alarm stands (after the sensor pass's guard): the user is told the gap changed, so the gap
+/// reported must be the one after the change, not the calibration's from before it.
+fn theta_after(st: &State, track: Option<&ThetaTrack>) -> (ThetaSummary, String, bool) {
     match track {
         Some(t) if st.model_fixed() => (
             t.now,
             "the parameter at the end of the record from its track over the whole record (Kalman filter at the last window)".to_string(),
+            true,
         ),
-        _ => search::theta_now(st),
+        Some(t) if t.alarm.is_some() && t.now.mean.is_finite() => (
+            t.now,
+            "the parameter at the end of the record from its track: the track's change alarm stands, so the calibration's value (from before the change) is no longer the gap now".to_string(),
+            true,
+        ),
+        _ => {
+            let (t, basis) = search::theta_now(st);
+            (t, basis, false)
+        }
     }
 }
 
@@ -843,9 +856,11 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
     let post = correct::post_pass(lp, rec, st, residual, pre)?;
     let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after);
     let (events, theta_track) = (post.events.clone(), post.track.clone());
-    let (theta_after, basis) = theta_after(&post.st, theta_track.as_ref());
-    let (theta_after, effect_sd) =
-        correct::propagate(&lp.with_y(&post.y), rec, &post, theta_after)?;
+    let (theta_after, basis, from_track) = theta_after(&post.st, theta_track.as_ref());
+    let (theta_after, effect_sd) = match from_track {
+        true => (theta_after, None),
+        false => correct::propagate(&lp.with_y(&post.y), rec, &post, theta_after)?,
+    };
     let sensor_report = correct::report(lp, rec, &post, theta_after)?;
     let conclusion = with_sensor(conclusion, sensor_report.as_ref());
     let unit = &lp.cfg.output_unit;

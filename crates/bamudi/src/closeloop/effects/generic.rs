@@ -109,7 +109,27 @@ pub(super) struct Candidate {
 
 impl Candidate {
     fn new(ctx: &FitContext<'_>, col: usize, tau_h: f64) -> Self {
+        let feature = &ctx.feats.names[col];
+        let name = if tau_h > 0.0 {
+            format!("lag{tau_h}h({feature})")
+        } else {
+            feature.clone()
+        };
         let values = lagged(ctx.feats, col, tau_h);
+        Self {
+            tau_h,
+            ..Self::from_values(ctx, col, name, values)
+        }
+    }
+
+    /// A candidate from given `values` at every row (`col`: the feature it is built from,
+    /// for plots; no lag).
+    pub(super) fn from_values(
+        ctx: &FitContext<'_>,
+        col: usize,
+        name: String,
+        values: Vec<f64>,
+    ) -> Self {
         let n = ctx.cal.len() as f64;
         let mean = ctx.cal.iter().map(|&i| values[i]).sum::<f64>() / n;
         let var = ctx
@@ -118,15 +138,9 @@ impl Candidate {
             .map(|&i| (values[i] - mean).powi(2))
             .sum::<f64>()
             / n;
-        let feature = &ctx.feats.names[col];
-        let name = if tau_h > 0.0 {
-            format!("lag{tau_h}h({feature})")
-        } else {
-            feature.clone()
-        };
         Self {
             col,
-            tau_h,
+            tau_h: 0.0,
             name,
             values,
             mean,

@@ -5,6 +5,7 @@ mod generic;
 mod lasso;
 mod linear;
 mod load_path;
+mod operational;
 mod stepwise;
 mod thermal;
 mod trend;
@@ -13,6 +14,7 @@ pub use basic::{GaugeDrift, GaugeOffset, OffsetJump};
 pub use generic::{Generic, Selection};
 pub use linear::{Basis, LinearTerm};
 pub use load_path::LoadPathHysteresis;
+pub use operational::{OperationalResponse, RESPONSE_SCALES_H};
 pub use thermal::Thermal;
 pub use trend::ParameterTrend;
 
@@ -22,8 +24,8 @@ use std::sync::Arc;
 /// The library searched at every step when the caller gives none: gauge offset, drift and
 /// offset jump; a thermal term for every temperature column (the configured ones, or every
 /// column declared in a temperature unit, [`is_temperature_unit`](super::is_temperature_unit));
-/// load-path hysteresis when a load is declared; the tracked parameter; and the data-driven
-/// term last.
+/// load-path hysteresis when a load is declared; the tracked parameter; then the two data-driven
+/// terms: the response to the record's operational events and the sparse covariate term.
 pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<dyn Effect>> {
     let temp_cols: Vec<String> = match &cfg.temperature_columns {
         Some(c) => c.clone(),
@@ -57,6 +59,7 @@ pub fn default_library(rec: &MeasuredRecord, cfg: &CloseLoopConfig) -> Vec<Arc<d
         parameter: cfg.parameter_name.clone(),
         track: cfg.track.clone(),
     }));
+    library.push(Arc::new(OperationalResponse));
     library.push(Arc::new(Generic {
         max_features: cfg.max_generic_features,
         selection: cfg.generic_selection,
