@@ -129,9 +129,9 @@ fn a_growing_gap_is_tracked_with_bands_that_hold_it() {
 
 /// A gap that opens by 15 in within a day at `at` (a quoin block giving way), seed `seed`:
 /// What one opening gave: `None` when the alarm fires after the opening, never before it,
-/// within 3 days, says "increase", and the gap now is within 2 in of the truth — both the
-/// track's and the one the loop reports (`theta_after`: with the alarm standing it must be the
-/// gap after the opening, not the calibration's from before it) — else what went wrong; and how
+/// within 3 days, says "increase", the track's gap now is within 2 in of the truth and the gap
+/// the loop reports (`theta_after`) is that one (with the alarm standing it must be the gap
+/// after the opening, not the calibration's from before it), else what went wrong; and how
 /// many of the three 95 % intervals (the alarm's onset and size ± 1.96 sd, `theta_after`)
 /// missed the truth (the opening day, 15 in, 105 in).
 fn opening_case(at: f64, seed: u64) -> (Option<String>, usize) {
@@ -154,7 +154,8 @@ fn opening_case(at: f64, seed: u64) -> (Option<String>, usize) {
         let size = (a.size - 15.0).abs() <= 1.96 * a.size_sd;
         usize::from(!onset) + usize::from(!size)
     }) + usize::from(!(after.ci95.0 <= 105.0 && 105.0 <= after.ci95.1));
-    let failed = !alarm_ok || (t.now.mean - 105.0).abs() > 2.0 || (after.mean - 105.0).abs() > 2.0;
+    // with the alarm standing the gap reported is the track's now, not the calibration's
+    let failed = !alarm_ok || (t.now.mean - 105.0).abs() > 2.0 || after.mean != t.now.mean;
     (failed.then_some(summary), misses)
 }
 
@@ -187,9 +188,10 @@ fn a_sudden_opening_raises_the_alarm_within_days() {
         .collect();
     let failures: Vec<&String> = runs.iter().filter_map(|r| r.0.as_ref()).collect();
     assert!(failures.is_empty(), "{failures:?}");
-    // 21 interval claims at 95 %: more than 3 misses has probability 0.02 if they hold
-    // (binomial(21, 0.05)). The bound was 2 of 14 (onset and size) before `theta_after` was
-    // added to the claims; the new bound was set before the first run with it.
+    // 21 interval claims at 95 %: more than 3 misses has probability 0.02 if they hold and
+    // are independent (binomial(21, 0.05)); the size's and `theta_after`'s intervals come from
+    // one track, so the figure is a guide. The bound was 2 of 14 (onset and size) before
+    // `theta_after` was added to the claims; the new bound was set before the first run with it.
     let misses: usize = runs.iter().map(|r| r.1).sum();
     assert!(
         misses <= 3,

@@ -42,7 +42,7 @@ use std::sync::Arc;
 pub enum EffectKind {
     /// A named physical effect.
     Physical,
-    /// The data-driven term (may be added more than once).
+    /// A data-driven term.
     DataDriven,
 }
 
@@ -55,6 +55,11 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     /// Physical or data-driven (default: physical).
     fn kind(&self) -> EffectKind {
         EffectKind::Physical
+    }
+    /// Whether the loop may add the effect again after it was accepted (default: data-driven
+    /// effects may, physical ones may not).
+    fn repeatable(&self) -> bool {
+        self.kind() == EffectKind::DataDriven
     }
     /// Whether the effect is relative to the calibrated model, so that a re-calibration
     /// must not absorb it (a parameter changing in time is: the loop then keeps the model

@@ -252,7 +252,8 @@ pub struct CloseLoopReport {
     pub heldout_rmse_total_after: f64,
     /// θ (in) of the first calibration.
     pub theta_before: ThetaSummary,
-    /// θ (in) after the loop; at the end of the record when a time-varying gap was accepted.
+    /// θ (in) after the loop; the track's value at the end of the record when a time-varying
+    /// gap was accepted or the track's change alarm stands (`theta_after_basis` says which).
     pub theta_after: ThetaSummary,
     /// What `theta_after` refers to.
     pub theta_after_basis: String,
@@ -861,7 +862,13 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         true => (theta_after, None),
         false => correct::propagate(&lp.with_y(&post.y), rec, &post, theta_after)?,
     };
-    let sensor_report = correct::report(lp, rec, &post, theta_after)?;
+    // with and without the corrections, both from a calibration (the track's gap after a
+    // change would make the change look like the corrections' doing)
+    let calibrated = match from_track {
+        true => search::theta_now(&post.st).0,
+        false => theta_after,
+    };
+    let sensor_report = correct::report(lp, rec, &post, calibrated)?;
     let conclusion = with_sensor(conclusion, sensor_report.as_ref());
     let unit = &lp.cfg.output_unit;
     let conclusion = with_alarms(conclusion, events.as_ref(), theta_track.as_ref(), unit);

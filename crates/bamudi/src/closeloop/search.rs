@@ -266,8 +266,7 @@ impl Loop<'_> {
         });
         let mut out = vec![];
         for effect in library {
-            let repeatable = effect.kind() == EffectKind::DataDriven;
-            if accepted.contains(&effect.name()) && !repeatable {
+            if accepted.contains(&effect.name()) && !effect.repeatable() {
                 continue;
             }
             let nu = self.nuisance_for(st, effect.keeps_model_fixed());

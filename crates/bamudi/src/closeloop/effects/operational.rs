@@ -8,9 +8,12 @@
 //! and fades) and a delayed one `Σ_events ((t − s)/τ) exp(1 − (t − s)/τ)` (a response that
 //! builds up, peaks `τ` after the event, then fades). A train's twelve columns together are a
 //! basis for its impulse response, in the manner of a Laguerre expansion: their sums shape
-//! lagged and decaying responses that none of them is. Trains are chosen whole, forward by BIC (each column costs
-//! one coefficient per gauge), at most [`MAX_TRAINS`]; the loop then accepts the term like every
-//! other effect: only when it lowers the rolling-origin cross-validated error by its margin.
+//! lagged and decaying responses (up to about a day and a half) that none of them is. Each
+//! train starts at its steady state (the calibration rows' event rate times `τ`), not at zero,
+//! so that the events before the record do not leave a ramp over its first days. One train is
+//! chosen, whole, by BIC (each column costs one coefficient per gauge); the loop then accepts
+//! the term like every other effect, once: only when it lowers the rolling-origin
+//! cross-validated error by its margin.
 
 use super::generic::Candidate;
 use super::linear::{Basis, LinearTerm};
@@ -23,8 +26,12 @@ use std::sync::Arc;
 /// The time scales of the responses (hours): a factor of two apart, from a fill's duration to
 /// more than a day.
 pub const RESPONSE_SCALES_H: [f64; 6] = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0];
-/// Most event trains in one term.
-const MAX_TRAINS: usize = 2;
+/// Most event trains in one term, and the term is not added twice: two trains of one column
+/// can rebuild the column's levels (the long-scale decays after entering and after leaving a
+/// state differ by about the state's indicator), and the levels of a lock's phase are a
+/// function of the head, the load the calibrated model answers for: a term in them took over
+/// part of a gap change on a design record.
+const MAX_TRAINS: usize = 1;
 /// Most distinct values a state column has (a lock's phase has four).
 const MAX_STATES: usize = 8;
 /// Fewest events of a train on the calibration rows: fewer cannot tell a response from noise.
@@ -53,8 +60,14 @@ impl Effect for OperationalResponse {
     fn kind(&self) -> EffectKind {
         EffectKind::DataDriven
     }
+    fn repeatable(&self) -> bool {
+        false
+    }
     fn fit(self: Arc<Self>, ctx: &FitContext<'_>, r: &DMatrix<f64>) -> Result<Option<Fitted>> {
         let groups = groups(ctx);
+        if groups.is_empty() {
+            return Ok(None);
+        }
         let chosen = select(ctx, r, &groups);
         if chosen.is_empty() {
             return Ok(None);
@@ -128,7 +141,7 @@ fn select(ctx: &FitContext<'_>, r: &DMatrix<f64>, groups: &[Group]) -> Vec<usize
     chosen
 }
 
-/// Whether feature `c` is a state column: whole numbers, two to [`MAX_STATES`] distinct values.
+/// Whether `values` are a state column's: whole numbers, two to [`MAX_STATES`] distinct values.
 fn is_state_column(values: &[f64]) -> bool {
     if values
         .iter()
@@ -142,9 +155,9 @@ fn is_state_column(values: &[f64]) -> bool {
     (2..=MAX_STATES).contains(&distinct.len())
 }
 
-/// The event trains of state column `col`: for each value `k`, the rows where the column
-/// enters `k` and those where it leaves `k` (`None` marks a train that repeats an earlier one,
-/// as the end of one phase of a cycle is the start of the next).
+/// The event trains of the state column `values` (named `name`): for each value `k`, the rows
+/// where the column enters `k` and those where it leaves `k`, each train once (in a cycle the
+/// end of one phase is the start of the next).
 fn trains(values: &[f64], name: &str) -> Vec<(String, Vec<bool>)> {
     let mut states: Vec<i64> = values.iter().map(|v| v.round() as i64).collect();
     states.sort_unstable();
@@ -167,13 +180,20 @@ fn trains(values: &[f64], name: &str) -> Vec<(String, Vec<bool>)> {
 /// The decaying and the delayed response to the events of `train` at time scale `tau_h`:
 /// `a_i = e^{−Δ/τ} a_{i−1} + [event at i]` and `b_i = e^{−Δ/τ} (b_{i−1} + (Δ/τ) a_{i−1})`,
 /// the exact sampled values of `Σ e^{−u/τ}` and `Σ (u/τ) e^{−u/τ}` (`u` the time since each
-/// event) on any row spacing; `b` is scaled by `e` to peak at one.
-pub(crate) fn responses(t_h: &[f64], train: &[bool], tau_h: f64) -> (Vec<f64>, Vec<f64>) {
+/// event) on any row spacing, started at their steady state for events at `rate_per_h` before
+/// the first row (both `rate · τ`); `b` is scaled by `e` to peak at one.
+pub(crate) fn responses(
+    t_h: &[f64],
+    train: &[bool],
+    tau_h: f64,
+    rate_per_h: f64,
+) -> (Vec<f64>, Vec<f64>) {
     let n = t_h.len();
     let (mut a, mut b) = (vec![0.0; n], vec![0.0; n]);
+    let steady = rate_per_h * tau_h;
     for i in 0..n {
         let (a0, b0, decay, dt) = match i {
-            0 => (0.0, 0.0, 0.0, 0.0),
+            0 => (steady, steady, 1.0, 0.0),
             _ => {
                 let dt = t_h[i] - t_h[i - 1];
                 (a[i - 1], b[i - 1], (-dt / tau_h).exp(), dt / tau_h)
@@ -184,6 +204,16 @@ pub(crate) fn responses(t_h: &[f64], train: &[bool], tau_h: f64) -> (Vec<f64>, V
     }
     b.iter_mut().for_each(|v| *v *= std::f64::consts::E);
     (a, b)
+}
+
+/// Events per hour of `train` over the calibration rows.
+fn event_rate(ctx: &FitContext<'_>, train: &[bool]) -> f64 {
+    let t = &ctx.feats.time_h;
+    let (Some(&first), Some(&last)) = (ctx.cal.first(), ctx.cal.last()) else {
+        return 0.0;
+    };
+    let count = ctx.cal.iter().filter(|&&i| train[i]).count() as f64;
+    count / (t[last] - t[first]).max(1e-9)
 }
 
 /// Every group: per state column beside the model, the responses of each train with at least
@@ -203,9 +233,10 @@ fn groups(ctx: &FitContext<'_>) -> Vec<Group> {
             if ctx.cal.iter().filter(|&&i| train[i]).count() < MIN_EVENTS {
                 continue;
             }
+            let rate = event_rate(ctx, &train);
             let mut cols = vec![];
             for tau in RESPONSE_SCALES_H {
-                let (a, b) = responses(&f.time_h, &train, tau);
+                let (a, b) = responses(&f.time_h, &train, tau, rate);
                 cols.push(Candidate::from_values(
                     ctx,
                     c,
@@ -239,12 +270,38 @@ mod tests {
         let t = [0.0, 0.5, 2.0, 2.25, 7.0, 30.0];
         let train = [true, false, false, false, false, false];
         let tau = 3.0;
-        let (a, b) = responses(&t, &train, tau);
+        let (a, b) = responses(&t, &train, tau, 0.0);
         for (i, &ti) in t.iter().enumerate() {
             let u: f64 = ti / tau;
             // tolerance: a few roundings of an exp per step
             assert!((a[i] - (-u).exp()).abs() < 1e-12, "{i}");
             assert!((b[i] - u * (1.0 - u).exp()).abs() < 1e-12, "{i}");
+        }
+    }
+
+    /// Events every 2 h from before the first row: started at the steady state, both responses
+    /// repeat with the events' period from the first row on (no start-up ramp).
+    #[test]
+    fn a_regular_train_starts_at_its_steady_state() {
+        let t: Vec<f64> = (0..200).map(|i| f64::from(i) * 0.5).collect();
+        let train: Vec<bool> = (0..200).map(|i| i % 4 == 0).collect();
+        for tau in RESPONSE_SCALES_H {
+            let (a, b) = responses(&t, &train, tau, 0.5);
+            // the mean over one period (4 rows) at the start and at the end. Tolerance: the
+            // start is the continuous-time mean `rate · τ`, not the periodic train's value just
+            // before an event; they differ by less than a third of the level, or of one event's
+            // response when the level is below one (started at zero, τ = 32 h is 16x off)
+            let mean = |v: &[f64], from: usize| v[from..from + 4].iter().sum::<f64>() / 4.0;
+            let (a0, a_late) = (mean(&a, 0), mean(&a, 196));
+            let (b0, b_late) = (mean(&b, 0), mean(&b, 196));
+            assert!(
+                (a0 - a_late).abs() < 0.35 * a_late.max(1.0),
+                "τ {tau}: {a0} {a_late}"
+            );
+            assert!(
+                (b0 - b_late).abs() < 0.35 * b_late.max(1.0),
+                "τ {tau}: {b0} {b_late}"
+            );
         }
     }
 
