@@ -776,6 +776,36 @@ fn theta_after(st: &State, track: Option<&ThetaTrack>) -> (ThetaSummary, String,
     }
 }
 
+/// The gap after the loop and the sensor pass's report.
+struct TheGap {
+    theta_after: ThetaSummary,
+    basis: String,
+    effect_sd: Option<f64>,
+    sensor_report: Option<SensorReport>,
+}
+
+/// `θ` after the loop ([`theta_after`]), widened for the effects' parameters when it is a
+/// calibration's, and the sensor report, whose gaps with and without the corrections are both
+/// a calibration's (the track's gap after a change would make the change look like the
+/// corrections' doing).
+fn the_gap(lp: &Loop<'_>, rec: &MeasuredRecord, post: &correct::PostPass) -> Result<TheGap> {
+    let (theta, basis, from_track) = theta_after(&post.st, post.track.as_ref());
+    let (theta_after, effect_sd) = match from_track {
+        true => (theta, None),
+        false => correct::propagate(&lp.with_y(&post.y), rec, post, theta)?,
+    };
+    let calibrated = match from_track {
+        true => search::theta_now(&post.st).0,
+        false => theta_after,
+    };
+    Ok(TheGap {
+        theta_after,
+        basis,
+        effect_sd,
+        sensor_report: correct::report(lp, rec, post, calibrated)?,
+    })
+}
+
 /// The state selection chose, made final.
 struct Final {
     /// Its effects re-fitted on every row selection used.
@@ -857,18 +887,12 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
     let post = correct::post_pass(lp, rec, st, residual, pre)?;
     let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after);
     let (events, theta_track) = (post.events.clone(), post.track.clone());
-    let (theta_after, basis, from_track) = theta_after(&post.st, theta_track.as_ref());
-    let (theta_after, effect_sd) = match from_track {
-        true => (theta_after, None),
-        false => correct::propagate(&lp.with_y(&post.y), rec, &post, theta_after)?,
-    };
-    // with and without the corrections, both from a calibration (the track's gap after a
-    // change would make the change look like the corrections' doing)
-    let calibrated = match from_track {
-        true => search::theta_now(&post.st).0,
-        false => theta_after,
-    };
-    let sensor_report = correct::report(lp, rec, &post, calibrated)?;
+    let TheGap {
+        theta_after,
+        basis,
+        effect_sd,
+        sensor_report,
+    } = the_gap(lp, rec, &post)?;
     let conclusion = with_sensor(conclusion, sensor_report.as_ref());
     let unit = &lp.cfg.output_unit;
     let conclusion = with_alarms(conclusion, events.as_ref(), theta_track.as_ref(), unit);
