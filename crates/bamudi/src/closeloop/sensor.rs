@@ -382,7 +382,10 @@ pub(crate) fn from_verdict(inp: &ScanInput<'_>, verdict: &AdequacyReport) -> Vec
             // structure near that gauge looks like (measured: a skin plate 5 % thinner than
             // drawn, undeclared, reads as a gain of +4.6 % on SG6): say so with the correction
             let evidence = format!(
-                "the calibration's adequacy verdict: sensor_{} on {} (z {:.1}, joint fit); over                  the whole record this is also what a local deviation of the structure near the                  gauge looks like (a plate thinner than drawn, a stiffer connection): check the                  gauge's calibration before reading it as a sensor fault",
+                "the calibration's adequacy verdict: sensor_{} on {} (z {:.1}, joint fit); over \
+                 the whole record this is also what a local deviation of the structure near the \
+                 gauge looks like (a plate thinner than drawn, a stiffer connection): check the \
+                 gauge's calibration before reading it as a sensor fault",
                 f.kind.name(),
                 f.gauge,
                 f.z
