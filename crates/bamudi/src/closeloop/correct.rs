@@ -105,6 +105,75 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
     })
 }
 
+/// Most re-calibrations spent re-sizing the pass's gain changes ([`refine_gains`]).
+const GAIN_ROUNDS: usize = 4;
+
+/// The pass's findings applied to the readings and the model re-calibrated on them; a gain
+/// change that starts inside the calibration window is then re-sized until the new calibration
+/// leaves no change of slope at its onset beyond twice its sd (at most [`GAIN_ROUNDS`] more
+/// calibrations). The first calibration, fitted to readings with the change in them, absorbs
+/// part of it (its fitted values carry a compromise gain), so the size measured against it is
+/// short by what was absorbed; against a calibration on corrected readings the remainder shows,
+/// and shrinks each round. The size's sd is the last round's sd and its last step, combined:
+/// the step is what the rounds did not settle. Returns the corrected readings and the state.
+pub(super) fn apply_and_recalibrate(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    pre: &mut PrePass,
+    fill: &DMatrix<f64>,
+) -> Result<(DMatrix<f64>, Option<State>)> {
+    let apply = |f: &[SensorFinding]| sensor::apply(f, &rec.y, fill, &rec.time_h, None).0;
+    let mut y = apply(&pre.findings);
+    if pre.findings.is_empty() {
+        return Ok((y, None));
+    }
+    let calibrate = |y: &DMatrix<f64>| -> Result<State> {
+        let (model, mean, var) = lp.with_y(y).calibrate(y)?;
+        Ok(State {
+            model,
+            mean,
+            var,
+            effects: vec![],
+            from_fold: vec![],
+        })
+    };
+    let mut st = calibrate(&y)?;
+    let n_cal = cal_end(lp);
+    for round in 0..GAIN_ROUNDS {
+        let r = &y - &st.mean;
+        let mut moved = false;
+        for f in pre.findings.iter_mut().filter(|f| {
+            f.kind == SensorKind::Gain
+                && f.action == sensor::SensorAction::Corrected
+                && f.from_row > 0
+                && f.from_row < n_cal
+        }) {
+            let Some((step, sd)) = sensor::gain_remainder(&r, &st.mean, f) else {
+                continue;
+            };
+            let k = f.size.unwrap_or(0.0);
+            if step.abs() > 2.0 * sd {
+                f.size = Some((1.0 + k) * (1.0 + step) - 1.0);
+                moved = true;
+            }
+            // the size is (1 + k)(1 + step) - 1: its sd is (1 + k) times the step's
+            f.size_sd = Some((sd * sd + step * step).sqrt() * (1.0 + k));
+            log::info!(
+                "gain of {} re-sized against calibration {}: {:+.4} (step {step:+.4} ± {sd:.4})",
+                f.gauges[0],
+                round + 2,
+                f.size.unwrap_or(0.0)
+            );
+        }
+        if !moved {
+            break;
+        }
+        y = apply(&pre.findings);
+        st = calibrate(&y)?;
+    }
+    Ok((y, Some(st)))
+}
+
 /// The whole-record analyses after selection, with the sensor pass's post-selection part:
 /// what the final state leaves, corrected for every sensor finding.
 pub(super) struct PostPass {

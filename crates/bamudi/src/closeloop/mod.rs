@@ -378,7 +378,7 @@ pub fn close_loop_with(
         from_fold: vec![],
     };
     // the sensor pass first: the loop then looks for effects in corrected readings
-    let pre = match cfg.sensor.enabled {
+    let mut pre = match cfg.sensor.enabled {
         true => correct::pre_pass(&lp, rec, &st)?,
         false => correct::PrePass {
             findings: vec![],
@@ -386,18 +386,10 @@ pub fn close_loop_with(
             coincident: vec![],
         },
     };
-    let findings = &pre.findings;
-    let y_corr = sensor::apply(findings, &rec.y, &st.mean, &rec.time_h, None).0;
+    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &st.mean)?;
     let lp = lp.with_y(&y_corr);
-    if !findings.is_empty() {
-        let (model, mean, var) = lp.calibrate(lp.y)?;
-        st = State {
-            model,
-            mean,
-            var,
-            effects: vec![],
-            from_fold: vec![],
-        };
+    if let Some(s) = recalibrated {
+        st = s;
     }
     let (steps, conclusion) = run_steps(&lp, &mut st, library)?;
     let run = Run {

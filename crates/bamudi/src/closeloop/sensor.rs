@@ -439,6 +439,20 @@ fn quiet_rows(from: usize, n: usize) -> std::ops::Range<usize> {
     if 4 * from >= n { 0..from } else { 0..n }
 }
 
+/// What is left of gain change `f` in residual `r` of fitted values `m`: the change of the
+/// gauge's slope at the finding's onset ([`GainContrast`]) and its sd (`None` when the fitted
+/// values vanish on either side).
+pub(crate) fn gain_remainder(
+    r: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    f: &SensorFinding,
+) -> Option<(f64, f64)> {
+    let g = f.gauge_columns[0];
+    let c = GainContrast::at(r, m, g, f.from_row)?;
+    let var = noise_var(r, quiet_rows(f.from_row, r.nrows()))[g];
+    Some((c.size, (var / c.information).sqrt()))
+}
+
 /// Channel exchanges: for every pair `(a, b)` and onset `τ`, the decrease of the residual sum
 /// of squares when their readings are exchanged from `τ` to the end, over the noise variance
 /// (the larger of the two gauges'); a finding when its best exceeds
@@ -503,11 +517,13 @@ pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<Sens
 }
 
 /// Changes of gain: for every gauge and onset `τ`, the decrease of the residual sum of squares
-/// (over the gauge's noise variance) when a gain change `k · fitted` is removed from `τ` to the
-/// end; a finding when its best exceeds `penalty_per_change_ln_n · ln n + 2 ln(gauges)`, the
-/// exchange scan's modified BIC with one choice among the gauges. It finds a gain change too
-/// small to move the gauge's level or its noise (on a gauge whose strain swings about zero),
-/// which the whole-record scan and the noise scan cannot see. Gauges in `skip` are not scanned.
+/// (over the gauge's noise variance) when the gauge's slope on the fitted values changes at
+/// `τ` ([`GainContrast`]: one slope before, another from `τ` to the end, against one slope for
+/// every row); a finding when its best exceeds `penalty_per_change_ln_n · ln n + 2 ln(gauges)`,
+/// the exchange scan's modified BIC with one choice among the gauges. It finds a gain change
+/// too small to move the gauge's level or its noise (on a gauge whose strain swings about
+/// zero), which the whole-record scan and the noise scan cannot see. Gauges in `skip` are not
+/// scanned.
 pub(crate) fn gain_scan(
     inp: &ScanInput<'_>,
     cfg: &SensorConfig,
@@ -522,27 +538,31 @@ pub(crate) fn gain_scan(
     let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * (k as f64).ln();
     let mut out = vec![];
     for g in (0..k).filter(|g| !skip.contains(g)) {
-        let (mut mr, mut mm) = (0.0, 0.0);
-        let mut best: Option<(f64, usize, f64, f64)> = None;
+        let all = GainContrast::sums(r, m, g, 0..n);
+        let mut after = (0.0, 0.0);
+        let mut best: Option<(f64, usize, GainContrast)> = None;
         for i in (cfg.min_span_rows.max(inp.earliest)..n).rev() {
-            mr += m[(i, g)] * r[(i, g)];
-            mm += m[(i, g)] * m[(i, g)];
-            if n - i < cfg.min_span_rows || mm <= 0.0 {
+            after.0 += m[(i, g)] * r[(i, g)];
+            after.1 += m[(i, g)] * m[(i, g)];
+            if n - i < cfg.min_span_rows {
                 continue;
             }
-            let stat = mr * mr / mm / var[g];
-            if best.is_none_or(|b| stat > b.0) {
-                best = Some((stat, i, mr / mm, (var[g] / mm).sqrt()));
+            let Some(c) = GainContrast::of(all, after) else {
+                continue;
+            };
+            let stat = c.explained / var[g];
+            if best.as_ref().is_none_or(|b| stat > b.0) {
+                best = Some((stat, i, c));
             }
         }
-        let Some((stat, at, size, sd)) = best.filter(|b| b.0 > threshold) else {
+        let Some((stat, at, c)) = best.filter(|b| b.0 > threshold) else {
             continue;
         };
         out.push(inp.finding(
             SensorKind::Gain,
             vec![g],
             (at, n),
-            (Some(size), Some(sd), "fraction"),
+            (Some(c.size), Some((var[g] / c.information).sqrt()), "fraction"),
             "gain scan",
             format!(
                 "a gain change of {} from day {:.2} lowers the residual sum of squares by {stat:.0} noise variances (threshold {threshold:.1})",
@@ -552,6 +572,60 @@ pub(crate) fn gain_scan(
         ));
     }
     out
+}
+
+/// A change of one gauge's slope on the fitted values at a row: the slope after it less the
+/// slope before it, with one slope for every row as the null. The slope before the change is
+/// estimated, not taken as zero, because a calibration whose window holds the change absorbs
+/// part of it: its fitted values then carry a compromise gain, the residual shows a slope of
+/// one sign before the change and of the other after it, and only their difference is the
+/// gauge's change of gain (on panel seed 1000, a 10 % change from day 5 read as +1 % from the
+/// slope after it alone).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GainContrast {
+    /// The slope after the change less the slope before it (fraction of the fitted values).
+    pub size: f64,
+    /// The decrease of the residual sum of squares over one slope for every row.
+    pub explained: f64,
+    /// The size's information per unit noise variance: its sd is `sqrt(var / information)`.
+    pub information: f64,
+}
+
+impl GainContrast {
+    /// `(Σ m·r, Σ m·m)` of gauge `g` over `rows`.
+    fn sums(
+        r: &DMatrix<f64>,
+        m: &DMatrix<f64>,
+        g: usize,
+        rows: std::ops::Range<usize>,
+    ) -> (f64, f64) {
+        rows.fold((0.0, 0.0), |(a, b), i| {
+            (a + m[(i, g)] * r[(i, g)], b + m[(i, g)] * m[(i, g)])
+        })
+    }
+
+    /// From the sums over every row and over the rows after the change (`None` when the
+    /// fitted values vanish on either side).
+    fn of(all: (f64, f64), after: (f64, f64)) -> Option<Self> {
+        let before = (all.0 - after.0, all.1 - after.1);
+        // a side whose fitted values carry under a millionth of the record's leaves no slope
+        let tiny = 1e-6 * all.1;
+        if !(after.1 > tiny && before.1 > tiny) {
+            return None;
+        }
+        let (ka, kb) = (after.0 / after.1, before.0 / before.1);
+        Some(Self {
+            size: ka - kb,
+            explained: after.0 * ka + before.0 * kb - all.0 * all.0 / all.1,
+            information: 1.0 / (1.0 / after.1 + 1.0 / before.1),
+        })
+    }
+
+    /// The change of gauge `g`'s slope at row `from` of `n`.
+    pub(crate) fn at(r: &DMatrix<f64>, m: &DMatrix<f64>, g: usize, from: usize) -> Option<Self> {
+        let n = r.nrows();
+        Self::of(Self::sums(r, m, g, 0..n), Self::sums(r, m, g, from..n))
+    }
 }
 
 /// Whether exchanging `a` and `b` from `at` lowers the residual more than a free level change
@@ -959,7 +1033,8 @@ const ONSET_SEARCH_DAYS: f64 = 3.0;
 
 /// A one-gauge finding (step, drift, gain change) re-dated and re-sized at the onset within
 /// [`ONSET_SEARCH_DAYS`] of its start whose single regressor removes the most of the gauge's
-/// residual sum of squares (the start the test used is one of the candidates).
+/// residual sum of squares (the start the test used is one of the candidates); a gain change
+/// as the change of the gauge's slope on the fitted values ([`GainContrast`]).
 fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
     let (r, m) = (inp.residual, inp.fitted);
     let t = &inp.rec.time_h;
@@ -967,14 +1042,31 @@ fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
     let regressor = |i: usize, from: usize| match f.kind {
         SensorKind::Step => Some(1.0),
         SensorKind::Drift => Some((t[i] - t[from]) / 24.0),
-        SensorKind::Gain => Some(m[(i, g)]),
         _ => None,
     };
+    let near =
+        |i: usize| i >= inp.earliest && (t[i] - t[f.from_row]).abs() <= ONSET_SEARCH_DAYS * 24.0;
+    if f.kind == SensorKind::Gain {
+        // a change of slope, sized against the slope before it ([`GainContrast`])
+        let best = (0..n.saturating_sub(2))
+            .filter(|&i| near(i))
+            .filter_map(|i| GainContrast::at(r, m, g, i).map(|c| (i, c)))
+            .max_by(|a, b| a.1.explained.total_cmp(&b.1.explained));
+        let Some((from, c)) = best else {
+            return f;
+        };
+        let var = noise_var(r, quiet_rows(f.from_row, n))[g];
+        return SensorFinding {
+            from_row: from,
+            from_day: inp.day(from),
+            size: Some(c.size),
+            size_sd: Some((var / c.information).sqrt()),
+            ..f
+        };
+    }
     if regressor(f.from_row, f.from_row).is_none() {
         return f;
     }
-    let near =
-        |i: usize| i >= inp.earliest && (t[i] - t[f.from_row]).abs() <= ONSET_SEARCH_DAYS * 24.0;
     let fit = |from: usize| {
         let (xr, xx) = (from..n).fold((0.0, 0.0), |(a, b), i| {
             let x = regressor(i, from).unwrap_or(0.0);
@@ -1112,6 +1204,55 @@ mod tests {
             ..inp
         };
         assert!(exchange_scan(&inp, &SensorConfig::default()).is_empty());
+    }
+
+    /// A fit whose window held a gain change absorbs part of it: its fitted values carry a
+    /// compromise gain `c`, so the residual has slope `-c` before the change and `k - c` after
+    /// it. The scan and the re-sizing read the change of slope, `k`, not the slope after it
+    /// (`k - c`, what they read before). The strain swings about zero (a gauge whose level
+    /// the change does not move), and the sizes are checked against their own sds.
+    #[test]
+    fn a_gain_change_the_fit_absorbed_in_part_is_sized_by_its_change_of_slope() {
+        let n = 1200;
+        let (at, k, c) = (100, 0.10, 0.07);
+        let strain = |i: usize| 40.0 * ((i as f64) / 7.0).sin();
+        let y = DMatrix::from_fn(n, 3, |i, g| {
+            let gain = if g == 1 && i >= at { 1.0 + k } else { 1.0 };
+            gain * strain(i) + wiggle(i, g)
+        });
+        // gauge 3's fitted values are 5 % low on every row: no change of gain there
+        let fitted = DMatrix::from_fn(n, 3, |i, g| {
+            strain(i)
+                * match g {
+                    1 => 1.0 + c,
+                    2 => 0.95,
+                    _ => 1.0,
+                }
+        });
+        let r = &y - &fitted;
+        let rec = record(y);
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &r,
+            fitted: &fitted,
+            unit: "microstrain",
+            earliest: 0,
+        };
+        let found = gain_scan(&inp, &SensorConfig::default(), &[]);
+        // one finding: gauge 3's whole-record slope is not a change (the slope after a row
+        // alone would read it as one at the first row the scan tries)
+        assert_eq!(found.len(), 1, "{found:?}");
+        let f = &found[0];
+        assert_eq!(f.gauge_columns, vec![1]);
+        assert!((f.from_row as i64 - at as i64).abs() <= 2, "{}", f.from_row);
+        // relative to the fitted values, the change is k / (1 + c); within 3 sds of it (the sd
+        // from the noise alone: about 0.0025 here)
+        let (size, sd) = (f.size.unwrap(), f.size_sd.unwrap());
+        let want = k / (1.0 + c);
+        assert!((size - want).abs() < 3.0 * sd, "{size} ± {sd}, want {want}");
+        assert!(sd < 0.01, "{sd}");
+        let (step, sd) = gain_remainder(&r, &fitted, f).unwrap();
+        assert!((step - want).abs() < 3.0 * sd, "{step} ± {sd}");
     }
 
     #[test]
