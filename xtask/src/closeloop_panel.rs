@@ -51,6 +51,10 @@ pub const KINDS: [&str; 12] = [
     "wall-flexure",
 ];
 
+/// The sizes written by the kinds a sensor finding sizes, small / medium / large: a gain change
+/// (fraction), an offset step (microstrain), a drift (microstrain per day).
+const SIZES: [[f64; 3]; 3] = [[0.02, 0.05, 0.10], [3.0, 8.0, 20.0], [0.05, 0.15, 0.4]];
+
 #[derive(clap::Args)]
 pub struct PanelArgs {
     /// Kinds, comma separated (default: all twelve).
@@ -101,6 +105,9 @@ struct Score {
     false_finding: bool,
     wall_s: f64,
     named: String,
+    /// For a gain, offset step or drift named by a sized sensor finding on the right gauge:
+    /// whether the finding's 95 % interval (size ± 1.96 sd) holds the size written.
+    size_held: Option<bool>,
 }
 
 pub fn run(args: &PanelArgs) -> Result<()> {
@@ -241,7 +248,35 @@ fn score_of(j: &serde_json::Value) -> Result<Score> {
         false_finding: b("false_finding")?,
         wall_s: f("wall_time_s")?,
         named: s("named")?,
+        size_held: size_held(j),
     })
+}
+
+/// Whether the right sensor finding's 95 % interval holds the size written into the record
+/// (`None` for the kinds without a size, or when no sized finding of the kind is on the right
+/// gauge: the cause column says whether it was named otherwise).
+fn size_held(j: &serde_json::Value) -> Option<bool> {
+    let (kind, magnitude) = (j["kind"].as_str()?, j["magnitude"].as_str()?);
+    let (row, kinds): (usize, &[&str]) = match kind {
+        "gain" => (0, &["gain"]),
+        "offset-step" => (1, &["step", "offset"]),
+        "drift" => (2, &["drift"]),
+        _ => return None,
+    };
+    let truth = SIZES[row][level(magnitude).ok()?];
+    let gauges: Vec<String> = gauges_of(kind)
+        .into_iter()
+        .map(|g| format!("SG{}", g + 1))
+        .collect();
+    let f = j["sensor"]["findings"].as_array()?.iter().find(|f| {
+        kinds.contains(&f["kind"].as_str().unwrap_or(""))
+            && f["gauges"]
+                .as_array()
+                .is_some_and(|g| g.iter().all(|g| gauges.iter().any(|x| x == g)))
+            && f["size"].is_number()
+    })?;
+    let (size, sd) = (f["size"].as_f64()?, f["size_sd"].as_f64()?);
+    Some((size - truth).abs() <= 1.96 * sd)
 }
 
 /// Day of an onset name.
@@ -324,19 +359,19 @@ fn inject(
     let mut gap_end = gap0;
     match kind {
         "gain" => {
-            let k = [0.02, 0.05, 0.10][magnitude];
+            let k = SIZES[0][magnitude];
             for i in first..n {
                 rec.y[(i, gs[0])] *= 1.0 + k;
             }
         }
         "offset-step" => {
-            let s = [3.0, 8.0, 20.0][magnitude];
+            let s = SIZES[1][magnitude];
             for i in first..n {
                 rec.y[(i, gs[0])] += s;
             }
         }
         "drift" => {
-            let rate = [0.05, 0.15, 0.4][magnitude];
+            let rate = SIZES[2][magnitude];
             for i in first..n {
                 rec.y[(i, gs[0])] += rate * (day(i) - onset);
             }
@@ -578,6 +613,8 @@ fn score(
         false_finding: kind == "clean" && !cause,
         wall_s,
         named: named(r),
+        // read from the record's JSON line (`score_of`), like every score the table shows
+        size_held: None,
     }
 }
 
@@ -627,18 +664,19 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
     );
     let _ = writeln!(
         s,
-        "| kind | magnitude | onset | seed | cause named | what the loop named | test RMSE / noise | gap 95 % holds the truth | gap alarm on a sensor fault | wall time (s) |\n|---|---|---|---|---|---|---|---|---|---|"
+        "| kind | magnitude | onset | seed | cause named | what the loop named | fitted size's 95 % holds the size written | test RMSE / noise | gap 95 % holds the truth | gap alarm on a sensor fault | wall time (s) |\n|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for x in scores {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.0} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.0} |",
             x.kind,
             x.magnitude,
             x.onset,
             x.seed,
             yes(x.cause),
             x.named,
+            x.size_held.map_or("–", yes),
             x.rmse_ratio,
             yes(x.covered),
             yes(x.gap_alarm),
@@ -666,6 +704,15 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
     s += &line(
         "all three",
         count(&|x| x.cause && x.rmse_ratio <= 1.5 && x.covered),
+    );
+    let sized: Vec<bool> = effect.iter().filter_map(|x| x.size_held).collect();
+    let (k, m) = (sized.iter().filter(|b| **b).count(), sized.len());
+    let (lo, hi) = wilson(k, m);
+    let _ = writeln!(
+        s,
+        "\nA gain, offset step or drift named by a sized sensor finding on the right gauge: its 95 % interval holds the size written in {k} of {m} (Wilson 95 %: {:.0} – {:.0} %).",
+        100.0 * lo,
+        100.0 * hi
     );
     let clean: Vec<&Score> = scores.iter().filter(|x| x.kind == "clean").collect();
     let mut walls: Vec<f64> = scores.iter().map(|x| x.wall_s).collect();

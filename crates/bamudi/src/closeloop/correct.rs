@@ -105,7 +105,7 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
     })
 }
 
-/// Most re-calibrations spent re-sizing the pass's gain changes ([`refine_gains`]).
+/// Most re-calibrations spent re-sizing the pass's gain changes ([`apply_and_recalibrate`]).
 const GAIN_ROUNDS: usize = 4;
 
 /// The pass's findings applied to the readings and the model re-calibrated on them; a gain
@@ -114,8 +114,12 @@ const GAIN_ROUNDS: usize = 4;
 /// calibrations). The first calibration, fitted to readings with the change in them, absorbs
 /// part of it (its fitted values carry a compromise gain), so the size measured against it is
 /// short by what was absorbed; against a calibration on corrected readings the remainder shows,
-/// and shrinks each round. The size's sd is the last round's sd and its last step, combined:
-/// the step is what the rounds did not settle. Returns the corrected readings and the state.
+/// and shrinks each round. The size's sd is the last round's sd combined with that round's
+/// step: when the rounds stop below twice the sd the step is what they left; when they run out,
+/// the step folded in last bounds what is left as long as each re-calibration absorbs less than
+/// half of the remaining change. (Each round folds in the change less what the re-calibration
+/// absorbs again, so the noise in the step is amplified by one over one less that share; the
+/// step term is what covers it.) Returns the corrected readings and the state.
 pub(super) fn apply_and_recalibrate(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
@@ -154,6 +158,11 @@ pub(super) fn apply_and_recalibrate(
             let k = f.size.unwrap_or(0.0);
             if step.abs() > 2.0 * sd {
                 f.size = Some((1.0 + k) * (1.0 + step) - 1.0);
+                // a gauge that lost more than half its signal is set aside, not rescaled (as
+                // the scans decide it); it is not re-sized again
+                if f.size.is_some_and(|k| k < -sensor::MAX_GAIN_LOSS) {
+                    f.action = sensor::SensorAction::SetAside;
+                }
                 moved = true;
             }
             // the size is (1 + k)(1 + step) - 1: its sd is (1 + k) times the step's

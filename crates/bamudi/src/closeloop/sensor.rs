@@ -31,7 +31,7 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 /// Largest loss of gain (`−k`) a correction rescales; beyond it the gauge is set aside.
-const MAX_GAIN_LOSS: f64 = 0.5;
+pub(super) const MAX_GAIN_LOSS: f64 = 0.5;
 
 /// Settings of the sensor pass (TOML section `[sensor]`).
 ///
@@ -1246,7 +1246,7 @@ mod tests {
         assert_eq!(f.gauge_columns, vec![1]);
         assert!((f.from_row as i64 - at as i64).abs() <= 2, "{}", f.from_row);
         // relative to the fitted values, the change is k / (1 + c); within 3 sds of it (the sd
-        // from the noise alone: about 0.0025 here)
+        // from the noise alone: about 0.004 here)
         let (size, sd) = (f.size.unwrap(), f.size_sd.unwrap());
         let want = k / (1.0 + c);
         assert!((size - want).abs() < 3.0 * sd, "{size} ± {sd}, want {want}");
