@@ -105,29 +105,45 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
     })
 }
 
-/// Most re-calibrations spent re-sizing the pass's gain changes ([`apply_and_recalibrate`]).
-const GAIN_ROUNDS: usize = 4;
+/// Most re-calibrations spent re-sizing the pass's gain changes and re-filling its set-aside
+/// cells ([`apply_and_recalibrate`]).
+const ROUNDS: usize = 4;
 
-/// The pass's findings applied to the readings and the model re-calibrated on them; a gain
-/// change that starts inside the calibration window is then re-sized until the new calibration
-/// leaves no change of slope at its onset beyond twice its sd (at most [`GAIN_ROUNDS`] more
-/// calibrations). The first calibration, fitted to readings with the change in them, absorbs
-/// part of it (its fitted values carry a compromise gain), so the size measured against it is
-/// short by what was absorbed; against a calibration on corrected readings the remainder shows,
-/// and shrinks each round. The size's sd is the last round's sd combined with that round's
-/// step: when the rounds stop below twice the sd the step is what they left; when they run out,
-/// the step folded in last bounds what is left as long as each re-calibration absorbs less than
-/// half of the remaining change. (Each round folds in the change less what the re-calibration
-/// absorbs again, so the noise in the step is amplified by one over one less that share; the
-/// step term is what covers it.) Returns the corrected readings and the state.
+/// A move of `θ`'s posterior mean, in posterior sds, below which re-filled set-aside cells
+/// are taken to have settled (set before any record was run: a tenth of an sd changes no
+/// interval a user reads).
+const FILL_SETTLED_SD: f64 = 0.1;
+
+/// The pass's findings applied to the readings and the model re-calibrated on them, then up to
+/// [`ROUNDS`] more calibrations while either of two things has not settled:
+///
+/// * **Gain changes that start inside the calibration window** are re-sized until the new
+///   calibration leaves no change of slope at their onsets beyond twice its sd
+///   ([`resize_gains`]). The first calibration, fitted to readings with the change in them,
+///   absorbs part of it, so the size measured against it is short by what was absorbed;
+///   against a calibration on corrected readings the remainder shows, and shrinks each round.
+/// * **Set-aside cells in the calibration window** are filled with the latest calibration's
+///   prediction. Filled from the first calibration only, which was fitted to the faulty
+///   readings, they vote for its `θ` and its discrepancy; re-filled from each new calibration
+///   they vote for the latest, which the other gauges move. Rounds stop when `θ` moves less
+///   than [`FILL_SETTLED_SD`]. This is a fixed point, not a calibration without the gauge: when
+///   the fault covers most of the window the first calibration's discrepancy has learnt the
+///   faulty readings, the fill reproduces them, and the rounds do not reach the truth (panel
+///   seed 1000, a gauge stuck from day 5: 69 ± 11 in first, 66 ± 5 in after, truth 90; stuck
+///   from day 30: the loop no longer adds an offset jump to the stuck gauge's fill).
+///
+/// `first` is the first calibration. Returns the corrected readings and the state (`None`
+/// with no finding).
 pub(super) fn apply_and_recalibrate(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
     pre: &mut PrePass,
-    fill: &DMatrix<f64>,
+    first: &State,
 ) -> Result<(DMatrix<f64>, Option<State>)> {
-    let apply = |f: &[SensorFinding]| sensor::apply(f, &rec.y, fill, &rec.time_h, None).0;
-    let mut y = apply(&pre.findings);
+    let apply = |f: &[SensorFinding], fill: &DMatrix<f64>| {
+        sensor::apply(f, &rec.y, fill, &rec.time_h, None)
+    };
+    let (mut y, mask) = apply(&pre.findings, &first.mean);
     if pre.findings.is_empty() {
         return Ok((y, None));
     }
@@ -141,46 +157,78 @@ pub(super) fn apply_and_recalibrate(
             from_fold: vec![],
         })
     };
-    let mut st = calibrate(&y)?;
     let n_cal = cal_end(lp);
-    for round in 0..GAIN_ROUNDS {
-        let r = &y - &st.mean;
-        let mut moved = false;
-        for f in pre.findings.iter_mut().filter(|f| {
-            f.kind == SensorKind::Gain
-                && f.action == sensor::SensorAction::Corrected
-                && f.from_row > 0
-                && f.from_row < n_cal
-        }) {
-            let Some((step, sd)) = sensor::gain_remainder(&r, &st.mean, f) else {
-                continue;
-            };
-            let k = f.size.unwrap_or(0.0);
-            if step.abs() > 2.0 * sd {
-                f.size = Some((1.0 + k) * (1.0 + step) - 1.0);
-                // a gauge that lost more than half its signal is set aside, not rescaled (as
-                // the scans decide it); it is not re-sized again
-                if f.size.is_some_and(|k| k < -sensor::MAX_GAIN_LOSS) {
-                    f.action = sensor::SensorAction::SetAside;
-                }
-                moved = true;
-            }
-            // the size is (1 + k)(1 + step) - 1: its sd is (1 + k) times the step's
-            f.size_sd = Some((sd * sd + step * step).sqrt() * (1.0 + k));
+    let filled = (0..n_cal.min(mask.nrows())).any(|i| mask.row(i).iter().any(|m| *m));
+    let mut theta = first.model.theta_summary();
+    let mut st = calibrate(&y)?;
+    for round in 0..ROUNDS {
+        let moved = resize_gains(pre, &(&y - &st.mean), &st.mean, n_cal, round);
+        let now = st.model.theta_summary();
+        let refill = filled && (now.mean - theta.mean).abs() > FILL_SETTLED_SD * now.sd;
+        if refill {
             log::info!(
-                "gain of {} re-sized against calibration {}: {:+.4} (step {step:+.4} ± {sd:.4})",
-                f.gauges[0],
-                round + 2,
-                f.size.unwrap_or(0.0)
+                "set-aside cells re-filled: θ {:.3} -> {:.3} (sd {:.3})",
+                theta.mean,
+                now.mean,
+                now.sd
             );
         }
-        if !moved {
+        if !(moved || refill) {
             break;
         }
-        y = apply(&pre.findings);
+        theta = now;
+        y = apply(&pre.findings, &st.mean).0;
         st = calibrate(&y)?;
     }
     Ok((y, Some(st)))
+}
+
+/// Re-sizes each corrected gain change whose onset is inside the calibration window (`0 <
+/// from < n_cal`; the verdict's whole-record gains start at 0) by what is left of it in
+/// residual `r` of fitted values `m` ([`sensor::gain_remainder`]), when that exceeds twice its
+/// sd. The size's sd is the round's sd combined with its step: when the rounds stop below twice
+/// the sd the step is what they left; when they run out, the step folded in last bounds what
+/// is left as long as each re-calibration absorbs less than half of the remaining change.
+/// (Each round folds in the change less what the re-calibration absorbs again, so the noise in
+/// the step is amplified by one over one less that share; the step term is what covers it.)
+/// Returns whether a size moved.
+fn resize_gains(
+    pre: &mut PrePass,
+    r: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    n_cal: usize,
+    round: usize,
+) -> bool {
+    let mut moved = false;
+    for f in pre.findings.iter_mut().filter(|f| {
+        f.kind == SensorKind::Gain
+            && f.action == sensor::SensorAction::Corrected
+            && f.from_row > 0
+            && f.from_row < n_cal
+    }) {
+        let Some((step, sd)) = sensor::gain_remainder(r, m, f) else {
+            continue;
+        };
+        let k = f.size.unwrap_or(0.0);
+        if step.abs() > 2.0 * sd {
+            f.size = Some((1.0 + k) * (1.0 + step) - 1.0);
+            // a gauge that lost more than half its signal is set aside, not rescaled (as the
+            // scans decide it); it is not re-sized again
+            if f.size.is_some_and(|k| k < -sensor::MAX_GAIN_LOSS) {
+                f.action = sensor::SensorAction::SetAside;
+            }
+            moved = true;
+        }
+        // the size is (1 + k)(1 + step) - 1: its sd is (1 + k) times the step's
+        f.size_sd = Some((sd * sd + step * step).sqrt() * (1.0 + k));
+        log::info!(
+            "gain of {} re-sized against calibration {}: {:+.4} (step {step:+.4} ± {sd:.4})",
+            f.gauges[0],
+            round + 2,
+            f.size.unwrap_or(0.0)
+        );
+    }
+    moved
 }
 
 /// The whole-record analyses after selection, with the sensor pass's post-selection part:

@@ -386,7 +386,7 @@ pub fn close_loop_with(
             coincident: vec![],
         },
     };
-    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &st.mean)?;
+    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &st)?;
     let lp = lp.with_y(&y_corr);
     if let Some(s) = recalibrated {
         st = s;
