@@ -642,11 +642,13 @@ pub fn warning_lines(warnings: &[GridWarning], key: &str) -> Vec<String> {
 
 /// The warnings of the close loop's final calibration of the gate (the θ posterior against
 /// its prior, as [`posterior_warnings`] for `calibrate`), as lines starting with `key`
-/// ([`warning_lines`]); none when the loop's model is not a gate calibration.
+/// ([`warning_lines`]; none when the loop's model is not a gate calibration), then one per
+/// gauge set aside on most of the calibration window ([`set_aside_warnings`]).
 pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str) -> Vec<String> {
+    let set_aside = set_aside_warnings(&out.report);
     let any: &dyn std::any::Any = out.model.as_ref();
     let Some(gate) = any.downcast_ref::<crate::calibrator::CalibratedGate>() else {
-        return vec![];
+        return set_aside;
     };
     let prior = out.model.theta_bounds();
     let key = format!("{key}: the loop's final calibration");
@@ -656,6 +658,38 @@ pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str)
         .map(|l| match l.starts_with(&key) {
             true => l,
             false => format!("the loop's final calibration: {l}"),
+        })
+        .chain(set_aside)
+        .collect()
+}
+
+/// A gauge set aside on more than half the calibration window's rows (a stuck or dead gauge,
+/// or one whose noise jumped, early in the record): the loop fills its cells with the model's
+/// own prediction, from a first calibration that was fitted to the faulty readings, and when
+/// those readings were most of the window the fill keeps their imprint. The gap then rests on
+/// the other gauges and on that fill, and can be confidently wrong (a gauge stuck from day 5
+/// of 60 on the FE gate: 66 ± 5 in for a gap of 90). Half the window is "most of it", set
+/// without a threshold search.
+fn set_aside_warnings(r: &bamudi::closeloop::CloseLoopReport) -> Vec<String> {
+    let Some(s) = &r.sensor else {
+        return vec![];
+    };
+    s.findings
+        .iter()
+        .filter(|f| f.action == bamudi::closeloop::SensorAction::SetAside)
+        .filter_map(|f| {
+            let rows = r.n_calibration.min(f.to_row).saturating_sub(f.from_row);
+            (2 * rows > r.n_calibration).then(|| {
+                format!(
+                    "{} is set aside from day {:.2} ({}), on {:.0} % of the calibration window: its cells are filled with the model's prediction from a calibration the faulty readings shaped, and the gap after ({:.2} ± {:.2}) rests on the other gauges and that fill: treat it as unverified",
+                    f.gauges.join(", "),
+                    f.from_day,
+                    f.kind.name(),
+                    100.0 * rows as f64 / r.n_calibration.max(1) as f64,
+                    r.theta_after.mean,
+                    r.theta_after.sd
+                )
+            })
         })
         .collect()
 }
@@ -755,4 +789,37 @@ pub fn export_deck(cfg: &GateConfig) -> Result<(String, String)> {
         }
     })?;
     Ok((deck, spec))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
+    use bamudi::closeloop::{CloseLoopConfig, close_loop};
+
+    /// A gauge stuck from hour 48 of a 45-day toy record (93 % of the 648-row calibration
+    /// window) is warned about, with its name and the share; one stuck from hour 600 (7 %) is
+    /// not: the warning is for a fill that most of the window's faulty readings shaped.
+    #[test]
+    fn a_gauge_set_aside_on_most_of_the_calibration_window_is_warned_about() {
+        let cfg = CloseLoopConfig::default()
+            .load(toy_load())
+            .parameter_name("gap")
+            .column_unit("air_temp_f", "degF");
+        for (at, warned) in [(48usize, true), (600, false)] {
+            let mut rec = record_with(&ToyGate::default(), 1080, 41, |_, _| 0.0).unwrap();
+            let v = rec.y[(at - 1, 3)];
+            for i in at..rec.len() {
+                rec.y[(i, 3)] = v;
+            }
+            let cal = GridCalibrator::new(ToyGate::default(), (40.0, 200.0));
+            let out = close_loop(&rec, &cal, &cfg).unwrap();
+            let w = set_aside_warnings(&out.report);
+            assert_eq!(!w.is_empty(), warned, "stuck from row {at}: {w:?}");
+            if warned {
+                assert!(w[0].starts_with("g4 is set aside"), "{w:?}");
+                assert!(w[0].contains("treat it as unverified"), "{w:?}");
+            }
+        }
+    }
 }
