@@ -588,7 +588,16 @@ fn score(
                 || gauge_alarm
         }
         "drift" => finding(&[SensorKind::Drift]) || effect("gauge_drift", &[]),
-        "exchange" => finding(&[SensorKind::ChannelExchange]),
+        // on the right side of its day: exchanged from within a day of the onset to the end
+        // (the other labelling, the readings before the day exchanged, is the wrong wiring)
+        "exchange" => r.sensor.as_ref().is_some_and(|s| {
+            s.findings.iter().any(|f| {
+                f.kind == SensorKind::ChannelExchange
+                    && f.gauges.iter().all(|g| gs.contains(g))
+                    && f.from_row > 0
+                    && onset_day(onset).is_ok_and(|d| (f.from_day - d).abs() <= 1.0)
+            })
+        }),
         "stuck" | "dead" => finding(&[SensorKind::Stuck]),
         "noise" => finding(&[SensorKind::NoiseIncrease]),
         "gap-step" | "gap-growth" => (gap_alarm || effect("time_varying_gap", &[])) && !sensor_any,

@@ -347,6 +347,15 @@ impl CalibratedModel for CalibratedGate {
         self.model.prior.bounds()[0]
     }
 
+    /// Module 3's grid posterior integrated, in the marginal mode (the default): its log
+    /// density is the marginal likelihood with every constant, the discrepancy integrated out.
+    /// The other modes fit the discrepancy to the same readings at each `θ` (a profile with no
+    /// Occam penalty), which two data sets cannot be compared by: `None`.
+    fn log_evidence(&self) -> Option<f64> {
+        let m3 = self.cal.module3();
+        m3.marginal.as_ref().and(m3.posterior.log_evidence())
+    }
+
     /// The discrepancy `δ(x)` (GPs over the load inputs) absorbs load-shaped residuals.
     fn absorbs_load_functions(&self) -> bool {
         true

@@ -19,47 +19,84 @@ pub(super) struct PrePass {
     pub tests: Vec<AttributionTest>,
     /// One-gauge findings not applied: other gauges changed at the same time.
     pub coincident: Vec<SensorFinding>,
+    /// A calibration on readings an exchange relabelled, made to decide which side of its day
+    /// was wired right ([`relabel`]); it replaces the first calibration as the pass's base.
+    pub relabelled: Option<Relabelled>,
+}
+
+/// A calibration on relabelled readings, and those readings.
+pub(super) struct Relabelled {
+    pub state: State,
+    pub y: DMatrix<f64>,
 }
 
 /// The findings of the first calibration: its verdict's gains and offsets, stuck gauges,
-/// channel exchanges and noise increases. A gauge found stuck or exchanged is not also
+/// channel exchanges, noise increases and gain changes. A gauge found stuck or exchanged is not also
 /// corrected from the verdict (its step or offset there is that fault seen through the
 /// calibration). An exchange has a structural rival (a change of the parameter moves every
-/// gauge), so it is kept only when the structure-or-sensor test from its onset calls it a
-/// sensor's.
-pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Result<PrePass> {
+/// gauge), so it is kept only when the structure-or-sensor test over its span calls it a
+/// sensor's; an exchange found before its day is then re-calibrated both ways ([`relabel`]),
+/// and the scans after it read the calibration kept.
+pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Result<PrePass> {
     let cfg = &lp.cfg.sensor;
-    let r = lp.y - &st.mean;
+    let mut tests = vec![];
+    // the model's sensitivity to θ, once per calibration the tests run on (the first, and
+    // the relabelled one when there is one), computed when a test first needs it
+    let mut sens: [Option<DMatrix<f64>>; 2] = [None, None];
+    let mut confirmed = |st: &State, inp: &ScanInput<'_>, f: &SensorFinding| -> Result<_> {
+        let s = &mut sens[usize::from(!std::ptr::eq(st, first))];
+        if s.is_none() {
+            *s = Some(sensor::sensitivity(st.model.as_ref(), lp.x)?);
+        }
+        Ok(confirm(inp, s.as_ref().expect("set above"), f, &mut tests))
+    };
+    let r = lp.y - &first.mean;
     let inp = ScanInput {
         rec,
         residual: &r,
-        fitted: &st.mean,
+        fitted: &first.mean,
         unit: &lp.cfg.output_unit,
         earliest: 0,
     };
-    let mut sens: Option<DMatrix<f64>> = None;
-    let mut tests = vec![];
-    let mut confirmed = |inp: &ScanInput<'_>, f: &SensorFinding| -> Result<Option<SensorFinding>> {
-        if sens.is_none() {
-            sens = Some(sensor::sensitivity(st.model.as_ref(), lp.x)?);
-        }
-        let subject = format!("{} {}", f.gauges.join("<->"), f.kind.name());
-        let (test, found) = sensor::attribute(&subject, inp, sens.as_ref().unwrap(), f.from_row);
-        log::info!("{subject} from day {:.2}: {}", f.from_day, test.verdict);
-        // the test's own best sensor hypothesis must be this finding (re-dated by the test)
-        tests.push(test);
-        Ok(found.filter(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns))
-    };
     let mut found = sensor::stuck_scan(&inp, cfg);
+    let mut relabelled = None;
     let taken = |f: &[SensorFinding], g: usize| f.iter().any(|x| x.gauge_columns.contains(&g));
     for e in sensor::exchange_scan(&inp, cfg) {
         if e.gauge_columns.iter().any(|&g| taken(&found, g)) {
             continue;
         }
-        if let Some(e) = confirmed(&inp, &e)? {
+        if let (Some(e), _) = confirmed(first, &inp, &e)? {
             found.push(e);
         }
     }
+    // an exchange the first calibration learnt shows before its day: the strongest few pairs
+    // whose change the structure-or-sensor test calls a sensor's (any sensor hypothesis: a
+    // learnt exchange can read as one gauge's gain), decided by re-calibration
+    let mut before = vec![];
+    for e in sensor::exchange_candidates(&inp, cfg, sensor::Side::Before) {
+        if before.len() == RELABEL_CANDIDATES {
+            break;
+        }
+        if e.gauge_columns.iter().any(|&g| taken(&found, g)) {
+            continue;
+        }
+        if confirmed(first, &inp, &e)?.1 {
+            before.push(e);
+        }
+    }
+    if !before.is_empty()
+        && let Some((e, st)) = relabel(lp, rec, first, &found, before)?
+    {
+        found.push(e);
+        relabelled = Some(st);
+    }
+    let st = relabelled.as_ref().map_or(first, |b: &Relabelled| &b.state);
+    let r = lp.y - &st.mean;
+    let inp = ScanInput {
+        residual: &r,
+        fitted: &st.mean,
+        ..inp
+    };
     if let Some(v) = st.model.adequacy() {
         for f in sensor::from_verdict(&inp, v) {
             if !taken(&found, f.gauge_columns[0]) {
@@ -89,7 +126,7 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
         .collect();
     let mut gains = vec![];
     for cand in sensor::gain_scan(&inp, cfg, &skip) {
-        if let Some(f) = confirmed(&inp, &cand)? {
+        if let (Some(f), _) = confirmed(st, &inp, &cand)? {
             gains.push(f);
         }
     }
@@ -102,7 +139,148 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, st: &State) -> Resul
         findings: found,
         tests,
         coincident,
+        relabelled,
     })
+}
+
+/// The structure-or-sensor test of finding `f` over its span (`sens`: the model's sensitivity):
+/// the finding as the test re-dated it, when the test's own best sensor hypothesis is this
+/// finding, and whether the test's verdict is a sensor's (any hypothesis).
+fn confirm(
+    inp: &ScanInput<'_>,
+    sens: &DMatrix<f64>,
+    f: &SensorFinding,
+    tests: &mut Vec<AttributionTest>,
+) -> (Option<SensorFinding>, bool) {
+    let span = (f.from_row, f.to_row.min(inp.residual.nrows()));
+    let mut subject = format!("{} {}", f.gauges.join("<->"), f.kind.name());
+    if span.1 < inp.residual.nrows() {
+        subject += &format!(" up to day {:.2}", f.to_day);
+    }
+    let (test, found) = sensor::attribute_span(&subject, inp, sens, span);
+    log::info!("{subject} from day {:.2}: {}", f.from_day, test.verdict);
+    let sensor = test.verdict == "sensor";
+    tests.push(test);
+    let found = found.filter(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns);
+    (found, sensor)
+}
+
+/// Most candidate exchanges found before their day that [`relabel`] re-calibrates (two
+/// calibrations each; the strongest first).
+const RELABEL_CANDIDATES: usize = 3;
+
+/// An exchange found before its day `τ` (rows `0..τ`) is one of two things: the readings were
+/// exchanged up to `τ` (a wiring mistake put right), or they were exchanged from `τ` on and
+/// the first calibration, fitted mostly to exchanged readings, learnt them (its discrepancy
+/// maps one gauge's strain onto the other's; the residual then also misnames the pair, since
+/// the learnt map is not exact). The residual cannot tell which. Each candidate pair is
+/// re-calibrated both ways and the relabelling with the largest log evidence kept
+/// ([`CalibratedModel::log_evidence`](super::CalibratedModel::log_evidence); relabelling two
+/// columns changes no constant of the likelihood, so they compare), when it beats the readings
+/// without the relabelling (the first calibration, or one on the pass's earlier findings
+/// applied) by more than `ln` of the number of relabellings tried (a Bayes factor above the
+/// prior odds of one among them); `None` when none does.
+fn relabel(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    first: &State,
+    found: &[SensorFinding],
+    candidates: Vec<SensorFinding>,
+) -> Result<Option<(SensorFinding, Relabelled)>> {
+    let n = lp.y.nrows();
+    let day = |i: usize| rec.time_h[i] / 24.0;
+    let calibrate = |extra: Option<&SensorFinding>| -> Result<(f64, Relabelled)> {
+        let all: Vec<SensorFinding> = found.iter().chain(extra).cloned().collect();
+        let y = sensor::apply(&all, lp.y, &first.mean, &rec.time_h, None).0;
+        let (model, mean, var) = lp.with_y(&y).calibrate(&y)?;
+        let state = State {
+            model,
+            mean,
+            var,
+            effects: vec![],
+            from_fold: vec![],
+        };
+        Ok((evidence(lp, &state, &y), Relabelled { state, y }))
+    };
+    // the baseline: the same readings and fills without the relabelling (the set-aside cells'
+    // fill alone would otherwise count as the relabelling's evidence)
+    let baseline = match found.is_empty() {
+        true => evidence(lp, first, lp.y),
+        false => calibrate(None)?.0,
+    };
+    let (mut best, mut words, mut tried) = (None::<(f64, SensorFinding, Relabelled)>, vec![], 0);
+    for cand in candidates {
+        // dated again without the fit's map of the pair, which the scan trusted
+        let pair = (cand.gauge_columns[0], cand.gauge_columns[1]);
+        let min_span = lp.cfg.sensor.min_span_rows;
+        let tau = sensor::exchange_onset(lp.y, &first.mean, pair, min_span).unwrap_or(cand.to_row);
+        let before = SensorFinding {
+            from_row: 0,
+            to_row: tau,
+            from_day: day(0),
+            to_day: day(tau - 1),
+            ..cand
+        };
+        let after = SensorFinding {
+            from_row: tau,
+            to_row: n,
+            from_day: day(tau),
+            to_day: day(n - 1),
+            ..before.clone()
+        };
+        for f in [before, after] {
+            tried += 1;
+            // a relabelling the calibration cannot fit is not a candidate (the loop goes on)
+            let (z, st) = match calibrate(Some(&f)) {
+                Ok(c) => c,
+                Err(e) => {
+                    log::warn!("{}: calibration failed, not a candidate: {e}", f.describe());
+                    continue;
+                }
+            };
+            let what = format!(
+                "{} days {:.2}-{:.2}",
+                f.gauges.join("<->"),
+                f.from_day,
+                f.to_day
+            );
+            log::info!("{what} exchanged: log evidence {z:.1} (without {baseline:.1})");
+            words.push(format!("{what}: {z:.1}"));
+            if best.as_ref().is_none_or(|b| z > b.0) {
+                best = Some((z, f, st));
+            }
+        }
+    }
+    let margin = (tried.max(1) as f64).ln();
+    let Some((z, mut f, st)) = best.filter(|b| b.0 - baseline > margin) else {
+        return Ok(None);
+    };
+    f.source = "exchange scan, re-calibrated".into();
+    f.evidence = format!(
+        "an exchange seen before its day (put right then, or learnt by the first calibration from then on): re-calibrated with each candidate relabelling, log evidence {} against {baseline:.1} without (margin {margin:.1}); the largest, {z:.1}, kept",
+        words.join(", ")
+    );
+    Ok(Some((f, st)))
+}
+
+/// A calibration's log evidence, or (when its model has none) the Gaussian profile likelihood
+/// of its residual on the calibration rows, each gauge's variance at its estimate.
+fn evidence(lp: &Loop<'_>, st: &State, y: &DMatrix<f64>) -> f64 {
+    if let Some(z) = st.model.log_evidence() {
+        return z;
+    }
+    let n = lp.cal.len().max(1) as f64;
+    (0..y.ncols())
+        .map(|g| {
+            let ms = lp
+                .cal
+                .iter()
+                .map(|&i| (y[(i, g)] - st.mean[(i, g)]).powi(2))
+                .sum::<f64>()
+                / n;
+            -0.5 * n * ((2.0 * std::f64::consts::PI * ms.max(1e-300)).ln() + 1.0)
+        })
+        .sum()
 }
 
 /// Most re-calibrations spent re-sizing the pass's gain changes and re-filling its set-aside
@@ -132,13 +310,16 @@ const FILL_SETTLED_SD: f64 = 0.1;
 ///   seed 1000, a gauge stuck from day 5: 69 ± 11 in first, 66 ± 5 in after, truth 90; stuck
 ///   from day 30: the loop no longer adds an offset jump to the stuck gauge's fill).
 ///
-/// `first` is the first calibration. Returns the corrected readings and the state (`None`
-/// with no finding).
+/// `first` is the pass's base: the first calibration, or the calibration on relabelled
+/// readings the pass kept ([`relabel`]), which is re-used when the corrected readings are the
+/// ones it was fitted to. Returns the corrected readings and the state (`None` with no
+/// finding).
 pub(super) fn apply_and_recalibrate(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
     pre: &mut PrePass,
     first: &State,
+    relabelled: Option<Relabelled>,
 ) -> Result<(DMatrix<f64>, Option<State>)> {
     let apply = |f: &[SensorFinding], fill: &DMatrix<f64>| {
         sensor::apply(f, &rec.y, fill, &rec.time_h, None)
@@ -160,7 +341,10 @@ pub(super) fn apply_and_recalibrate(
     let n_cal = cal_end(lp);
     let filled = (0..n_cal.min(mask.nrows())).any(|i| mask.row(i).iter().any(|m| *m));
     let mut theta = first.model.theta_summary();
-    let mut st = calibrate(&y)?;
+    let mut st = match relabelled {
+        Some(b) if b.y == y => b.state,
+        _ => calibrate(&y)?,
+    };
     for round in 0..ROUNDS {
         let moved = resize_gains(pre, &(&y - &st.mean), &st.mean, n_cal, round);
         let now = st.model.theta_summary();
@@ -269,6 +453,7 @@ pub(super) fn post_pass(
         findings,
         tests,
         coincident,
+        ..
     } = pre;
     let mask0 = sensor::apply(&findings, lp.y, &st.mean, &rec.time_h, None).1;
     let mut post = PostPass {
@@ -371,6 +556,13 @@ fn gap_alarm_guard(
                 }
                 break;
             }
+            // a one-gauge change within a day of a finding already applied on another gauge is
+            // one change on two gauges, the structure's doing (as among the post-selection
+            // findings): not applied, and the alarm stands
+            (Some(f), None) if round == 0 && coincides(&f, &post.findings) => {
+                post.coincident.push(f);
+                break;
+            }
             (Some(f), None) if round == 0 => apply_more(lp, rec, post, &mut vec![f])?,
             _ => break,
         }
@@ -445,15 +637,25 @@ const COINCIDENT_DAYS: f64 = 1.0;
 /// the model's sensitivity, so one gauge at a time can beat the structure hypothesis); a
 /// sensor fault is one gauge's. Returns the findings kept and those dropped.
 fn one_gauge_at_a_time(found: Vec<SensorFinding>) -> (Vec<SensorFinding>, Vec<SensorFinding>) {
-    let alone = |f: &SensorFinding| {
-        f.kind == SensorKind::ChannelExchange
-            || !found.iter().any(|o| {
-                o.gauge_columns != f.gauge_columns
-                    && o.kind != SensorKind::ChannelExchange
-                    && (o.from_day - f.from_day).abs() <= COINCIDENT_DAYS
-            })
+    found.iter().cloned().partition(|f| !coincides(f, &found))
+}
+
+/// Whether one-gauge change `f` starts within [`COINCIDENT_DAYS`] of a one-gauge change (a
+/// step, offset, drift or gain change) on another gauge among `others`. An exchange is never
+/// coincident, and a stuck or noisy gauge's set-aside span is not a change of its level.
+fn coincides(f: &SensorFinding, others: &[SensorFinding]) -> bool {
+    let change = |x: &SensorFinding| {
+        matches!(
+            x.kind,
+            SensorKind::Step | SensorKind::Drift | SensorKind::Gain | SensorKind::Offset
+        )
     };
-    found.iter().cloned().partition(|f| alone(f))
+    change(f)
+        && others.iter().any(|o| {
+            o.gauge_columns != f.gauge_columns
+                && change(o)
+                && (o.from_day - f.from_day).abs() <= COINCIDENT_DAYS
+        })
 }
 
 /// The gain scan on the final residual ([`sensor::gain_scan`]), each candidate kept only when

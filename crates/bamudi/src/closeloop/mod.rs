@@ -145,6 +145,14 @@ pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
     fn adequacy(&self) -> Option<&crate::adequacy::AdequacyReport> {
         None
     }
+    /// The log evidence of the calibration data, `ln ∫ p(y | θ) p(θ) dθ` (hyper-parameters at
+    /// their estimates), when the model has it. The loop compares two relabellings of the same
+    /// readings by it (an exchange of channels: which side of its day was wired right); without
+    /// it, by the residual's Gaussian profile likelihood on the calibration rows. Default:
+    /// `None`.
+    fn log_evidence(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// Calibrates a model on input rows `x` and outputs `y` from which the loop has already
@@ -384,9 +392,12 @@ pub fn close_loop_with(
             findings: vec![],
             tests: vec![],
             coincident: vec![],
+            relabelled: None,
         },
     };
-    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &st)?;
+    let base = pre.relabelled.take();
+    let first = base.as_ref().map_or(&st, |b| &b.state).clone();
+    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &first, base)?;
     let lp = lp.with_y(&y_corr);
     if let Some(s) = recalibrated {
         st = s;

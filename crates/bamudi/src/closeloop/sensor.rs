@@ -11,8 +11,9 @@
 //!   jointly fitted with the calibration: [`crate::adequacy`]); a discrepancy can absorb a
 //!   gain so that the residual looks clean, and only the verdict sees it;
 //! * the exchange scan: every pair of gauges, the onset at which exchanging their readings
-//!   from then on lowers the residual sum of squares most; a finding when the decrease exceeds
-//!   a modified-BIC penalty;
+//!   from then on (or up to then: an exchange the calibration learnt) lowers the residual sum
+//!   of squares most; a finding when the decrease exceeds a modified-BIC penalty;
+//! * the gain scan: one gauge's change of slope on the fitted values from an onset to the end;
 //! * the stuck scan (a reading that repeats exactly) and the noise scan (a change of level of
 //!   the log squared first differences of one gauge's residual);
 //! * after selection, every change of level the whole-record scan finds on one gauge alone
@@ -455,10 +456,46 @@ pub(crate) fn gain_remainder(
 
 /// Channel exchanges: for every pair `(a, b)` and onset `τ`, the decrease of the residual sum
 /// of squares when their readings are exchanged from `τ` to the end, over the noise variance
-/// (the larger of the two gauges'); a finding when its best exceeds
-/// `penalty_per_change_ln_n · ln n + 2 ln(pairs)` and the exchange also beats a free level
-/// change on each gauge (an exchange is a specific pattern; two steps are not one).
+/// (the larger of the two gauges'); a finding when its best exceeds the threshold of
+/// [`exchange_candidates`] and the exchange also beats a free level change on each gauge (an
+/// exchange is a specific pattern; two steps are not one). One exchange per gauge, the
+/// strongest.
 pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<SensorFinding> {
+    let mut used = vec![false; inp.residual.ncols()];
+    let mut out = vec![];
+    for f in exchange_candidates(inp, cfg, Side::After) {
+        let (a, b) = (f.gauge_columns[0], f.gauge_columns[1]);
+        if !(used[a] || used[b]) {
+            used[a] = true;
+            used[b] = true;
+            out.push(f);
+        }
+    }
+    out
+}
+
+/// Which rows of a candidate exchange are exchanged: from its day to the end, or from the
+/// first row up to its day.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Side {
+    After,
+    Before,
+}
+
+/// Every pair's best exchange on `side` of an onset `τ` whose decrease of the residual sum of
+/// squares exceeds `penalty_per_change_ln_n · ln n + 2 ln(pairs) + 2 ln 2` (the modified BIC,
+/// with one choice among the pairs and one between the two sides) and beats two free level
+/// changes, strongest first.
+///
+/// The side before `τ` is where an exchange that covers most of the calibration window shows:
+/// the calibration learnt it (its discrepancy maps one gauge's strain onto the other's), so the
+/// residual is large where the readings are right. Which side was wired right is then decided
+/// by re-calibrating both ways (`correct::pre_pass`).
+pub(crate) fn exchange_candidates(
+    inp: &ScanInput<'_>,
+    cfg: &SensorConfig,
+    side: Side,
+) -> Vec<SensorFinding> {
     let (r, m) = (inp.residual, inp.fitted);
     let (n, k) = (r.nrows(), r.ncols());
     if n < 2 * cfg.min_span_rows || k < 2 {
@@ -466,54 +503,120 @@ pub(crate) fn exchange_scan(inp: &ScanInput<'_>, cfg: &SensorConfig) -> Vec<Sens
     }
     let var = noise_var(r, 0..r.nrows());
     let pairs = (k * (k - 1) / 2) as f64;
-    let threshold = cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * pairs.ln();
-    let mut found: Vec<(f64, usize, usize, usize)> = vec![];
+    let threshold =
+        cfg.penalty_per_change_ln_n * (n as f64).ln() + 2.0 * pairs.ln() + 2.0 * 2f64.ln();
+    let (edge, min_span) = (cfg.min_span_rows.min(n), cfg.min_span_rows.min(8));
+    let mut found: Vec<(f64, usize, usize, (usize, usize))> = vec![];
     for a in 0..k {
         for b in a + 1..k {
             let s2 = var[a].max(var[b]);
-            // suffix sums of the gain of exchanging at each row
-            let mut best = (0.0, n);
-            let mut s = 0.0;
-            for i in (cfg.min_span_rows.min(n)..n).rev() {
+            let gain = |i: usize| {
                 let ya = r[(i, a)] + m[(i, a)];
                 let yb = r[(i, b)] + m[(i, b)];
                 let before = r[(i, a)].powi(2) + r[(i, b)].powi(2);
                 let after = (yb - m[(i, a)]).powi(2) + (ya - m[(i, b)]).powi(2);
-                s += (before - after) / s2;
-                if n - i >= cfg.min_span_rows.min(8) && s > best.0 {
-                    best = (s, i);
+                (before - after) / s2
+            };
+            // running sums of the gain of exchanging each row, from the end or from the start
+            let mut best = (0.0, (n, n));
+            let mut s = 0.0;
+            match side {
+                Side::After => {
+                    for i in (edge..n).rev() {
+                        s += gain(i);
+                        if n - i >= min_span && s > best.0 {
+                            best = (s, (i, n));
+                        }
+                    }
+                }
+                Side::Before => {
+                    for i in 0..n - edge {
+                        s += gain(i);
+                        if i + 1 >= min_span && s > best.0 {
+                            best = (s, (0, i + 1));
+                        }
+                    }
                 }
             }
-            if best.0 > threshold {
+            if best.0 > threshold && beats_two_steps(r, a, b, best.1, best.0, &var) {
                 found.push((best.0, a, b, best.1));
             }
         }
     }
-    // the strongest exchange per gauge: a gauge is exchanged with one other
     found.sort_by(|x, y| y.0.total_cmp(&x.0));
-    let mut used = vec![false; k];
-    let mut out = vec![];
-    for (stat, a, b, at) in found {
-        if used[a] || used[b] || !beats_two_steps(r, m, a, b, at, stat, &var) {
-            continue;
-        }
-        used[a] = true;
-        used[b] = true;
-        out.push(inp.finding(
-            SensorKind::ChannelExchange,
-            vec![a, b],
-            (at, n),
-            (None, None, ""),
-            "exchange scan",
-            format!(
-                "exchanging {} and {} from day {:.2} lowers the residual sum of squares by {stat:.0} noise variances (threshold {threshold:.1})",
-                inp.rec.gauge_names[a],
-                inp.rec.gauge_names[b],
-                inp.day(at)
-            ),
-        ));
+    found
+        .into_iter()
+        .map(|(stat, a, b, span)| {
+            inp.finding(
+                SensorKind::ChannelExchange,
+                vec![a, b],
+                span,
+                (None, None, ""),
+                "exchange scan",
+                format!(
+                    "exchanging {} and {} from day {:.2} to {:.2} lowers the residual sum of squares by {stat:.0} noise variances (threshold {threshold:.1})",
+                    inp.rec.gauge_names[a],
+                    inp.rec.gauge_names[b],
+                    inp.day(span.0),
+                    inp.day(span.1 - 1)
+                ),
+            )
+        })
+        .collect()
+}
+
+/// The day an exchange of `a` and `b` starts or ends, read without trusting the fit's map of
+/// the pair: the row `τ` at which regressing both gauges' readings on the pair's fitted values
+/// (and a constant) separately before and after `τ` leaves the smallest residual sum of
+/// squares (each gauge over its noise variance, at least `min_span` rows a side). A fit that
+/// learnt an exchange in part maps each gauge onto a mixture of the two strains; the mixture
+/// changes at `τ` whichever the fit learnt, so the two-segment regression dates it where the
+/// exchange scan's running sums, which read the fit's map as the truth, may not.
+pub(crate) fn exchange_onset(
+    y: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    (a, b): (usize, usize),
+    min_span: usize,
+) -> Option<usize> {
+    use nalgebra::{Matrix3, Vector3};
+    let n = y.nrows();
+    if n < 2 * min_span.max(4) {
+        return None;
     }
-    out
+    let r = y - m;
+    let var = noise_var(&r, 0..n);
+    // running sums of X'X, X'y and y'y (X = [1, m_a, m_b]) per gauge
+    let x = |i: usize| Vector3::new(1.0, m[(i, a)], m[(i, b)]);
+    let mut xx = vec![Matrix3::zeros(); n + 1];
+    let mut xy = vec![[Vector3::zeros(); 2]; n + 1];
+    let mut yy = vec![[0.0; 2]; n + 1];
+    for i in 0..n {
+        let xi = x(i);
+        xx[i + 1] = xx[i] + xi * xi.transpose();
+        for (k, g) in [a, b].into_iter().enumerate() {
+            xy[i + 1][k] = xy[i][k] + xi * y[(i, g)];
+            yy[i + 1][k] = yy[i][k] + y[(i, g)].powi(2);
+        }
+    }
+    let rss = |lo: usize, hi: usize| -> f64 {
+        let sxx = xx[hi] - xx[lo];
+        // a ridge of a billionth of the trace keeps a flat segment solvable
+        let ridge = 1e-9 * sxx.trace().max(1e-12);
+        let Some(inv) = (sxx + Matrix3::identity() * ridge).try_inverse() else {
+            return f64::INFINITY;
+        };
+        [a, b]
+            .into_iter()
+            .enumerate()
+            .map(|(k, g)| {
+                let sxy = xy[hi][k] - xy[lo][k];
+                (yy[hi][k] - yy[lo][k] - sxy.dot(&(inv * sxy))).max(0.0) / var[g]
+            })
+            .sum()
+    };
+    let min_span = min_span.max(4);
+    (min_span..=n - min_span)
+        .min_by(|&i, &j| (rss(0, i) + rss(i, n)).total_cmp(&(rss(0, j) + rss(j, n))))
 }
 
 /// Changes of gain: for every gauge and onset `τ`, the decrease of the residual sum of squares
@@ -628,25 +731,23 @@ impl GainContrast {
     }
 }
 
-/// Whether exchanging `a` and `b` from `at` lowers the residual more than a free level change
-/// of each gauge from `at` (two parameters).
+/// Whether exchanging `a` and `b` over rows `span` lowers the residual more than a free level
+/// change of each gauge over them (two parameters).
 fn beats_two_steps(
     r: &DMatrix<f64>,
-    m: &DMatrix<f64>,
     a: usize,
     b: usize,
-    at: usize,
+    span: (usize, usize),
     exchange_gain: f64,
     var: &[f64],
 ) -> bool {
     let n = r.nrows();
     let s2 = var[a].max(var[b]);
     let level_gain = |g: usize| {
-        let v: Vec<f64> = (at..n).map(|i| r[(i, g)]).collect();
+        let v: Vec<f64> = (span.0..span.1).map(|i| r[(i, g)]).collect();
         let mean = v.iter().sum::<f64>() / v.len() as f64;
         v.len() as f64 * mean * mean / s2
     };
-    let _ = m;
     exchange_gain > level_gain(a) + level_gain(b) + 2.0 * (n as f64).ln()
 }
 
@@ -825,7 +926,19 @@ pub(crate) fn attribute(
     sensitivity: &DMatrix<f64>,
     from: usize,
 ) -> (AttributionTest, Option<SensorFinding>) {
-    let c = Change::new(inp, from);
+    attribute_span(subject, inp, sensitivity, (from, inp.residual.nrows()))
+}
+
+/// [`attribute`] over the rows `span.0..span.1` (judged against the noise of the rows outside
+/// them): a change that holds before a day rather than after it, as an exchange the
+/// calibration learnt shows (see [`exchange_candidates`]).
+pub(crate) fn attribute_span(
+    subject: &str,
+    inp: &ScanInput<'_>,
+    sensitivity: &DMatrix<f64>,
+    span: (usize, usize),
+) -> (AttributionTest, Option<SensorFinding>) {
+    let c = Change::new(inp, span);
     // structure: one Δ over every gauge, a step of the parameter from `from` or a ramp from it
     // (a gap that opens suddenly or grows)
     let structure = c
@@ -844,7 +957,7 @@ pub(crate) fn attribute(
     };
     let test = AttributionTest {
         subject: subject.into(),
-        from_day: inp.day(from),
+        from_day: inp.day(span.0),
         none: c.none,
         structure,
         sensor,
@@ -854,7 +967,11 @@ pub(crate) fn attribute(
     };
     let finding = best
         .filter(|_| sensor_wins)
-        .map(|f| refine_onset(inp, f))
+        // a change up to a day is dated by its span's end, which the scan set
+        .map(|f| match span.1 == inp.residual.nrows() {
+            true => refine_onset(inp, f),
+            false => f,
+        })
         .filter(|f| f.from_row >= inp.earliest)
         .map(|mut f| {
             f.evidence = format!(
@@ -866,33 +983,40 @@ pub(crate) fn attribute(
     (test, finding)
 }
 
-/// One tested change: the residual from row `from` on, judged against the noise variances
-/// of the rows before it; `none` is its score with no change.
+/// One tested change: the residual over rows `from..to`, judged against the noise variances
+/// of the rows outside them; `none` is its score with no change.
 struct Change<'a, 'b> {
     inp: &'a ScanInput<'b>,
     var: Vec<f64>,
     from: usize,
+    to: usize,
     none: f64,
 }
 
 impl<'a, 'b> Change<'a, 'b> {
-    fn new(inp: &'a ScanInput<'b>, from: usize) -> Self {
+    fn new(inp: &'a ScanInput<'b>, (from, to): (usize, usize)) -> Self {
         let r = inp.residual;
         let n = r.nrows();
-        let var = noise_var(r, quiet_rows(from, n));
+        let quiet = match from {
+            0 if 4 * (n - to) >= n => to..n,
+            0 => 0..n,
+            _ => quiet_rows(from, n),
+        };
+        let var = noise_var(r, quiet);
         let none = (0..r.ncols())
-            .map(|g| (from..n).map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
+            .map(|g| (from..to).map(|i| r[(i, g)].powi(2)).sum::<f64>() / var[g])
             .sum();
         Self {
             inp,
             var,
             from,
+            to,
             none,
         }
     }
 
     fn rows(&self) -> std::ops::Range<usize> {
-        self.from..self.inp.residual.nrows()
+        self.from..self.to
     }
 
     /// Days from the change's start to row `i`.
@@ -959,7 +1083,7 @@ impl Best {
 /// an exchange of one pair's readings.
 fn best_sensor(c: &Change<'_, '_>) -> Best {
     let (inp, m) = (c.inp, c.inp.fitted);
-    let (n, k) = (m.nrows(), m.ncols());
+    let k = m.ncols();
     let src = "structure-or-sensor test";
     let per_day = format!("{} per day", inp.unit);
     let mut best = Best(f64::INFINITY, String::new(), None);
@@ -985,7 +1109,7 @@ fn best_sensor(c: &Change<'_, '_>) -> Best {
                 continue;
             };
             best.offer(score, format!("{name} {what}"), || {
-                let span = (c.from, n);
+                let span = (c.from, c.to);
                 inp.finding(
                     kind,
                     vec![g],
@@ -1008,7 +1132,7 @@ fn best_sensor(c: &Change<'_, '_>) -> Best {
                     inp.finding(
                         SensorKind::ChannelExchange,
                         vec![a, b],
-                        (c.from, n),
+                        (c.from, c.to),
                         none,
                         src,
                         String::new(),
@@ -1204,6 +1328,70 @@ mod tests {
             ..inp
         };
         assert!(exchange_scan(&inp, &SensorConfig::default()).is_empty());
+    }
+
+    /// An exchange from early in the record that the calibration learnt: the fitted values
+    /// are the exchanged strains everywhere, so the residual shows the exchange only before
+    /// its day. The scan finds it there, over rows `0..τ`, and nothing on a record whose fit
+    /// and readings agree.
+    #[test]
+    fn an_exchange_the_fit_learnt_is_found_before_its_day() {
+        let n = 400;
+        let truth = |i: usize, g: usize| (g as f64 + 1.0) * 10.0 * ((i as f64) / 9.0).sin();
+        let swap = |g: usize| match g {
+            0 => 2,
+            2 => 0,
+            g => g,
+        };
+        let swap_at = 40;
+        let y = DMatrix::from_fn(n, 4, |i, g| {
+            let g2 = if i >= swap_at { swap(g) } else { g };
+            truth(i, g2) + wiggle(i, g)
+        });
+        let fitted = DMatrix::from_fn(n, 4, |i, g| truth(i, swap(g)));
+        let r = &y - &fitted;
+        let rec = record(y.clone());
+        let inp = ScanInput {
+            rec: &rec,
+            residual: &r,
+            fitted: &fitted,
+            unit: "microstrain",
+            earliest: 0,
+        };
+        let f = exchange_candidates(&inp, &SensorConfig::default(), Side::Before);
+        assert_eq!(f[0].gauges, vec!["SG1", "SG3"], "{f:?}");
+        assert!(exchange_scan(&inp, &SensorConfig::default()).is_empty());
+        assert_eq!(f[0].from_row, 0);
+        assert!(
+            (f[0].to_row as i64 - swap_at as i64).abs() <= 2,
+            "{}",
+            f[0].to_row
+        );
+        // relabelled up to its day, the readings agree with the fit (within the noise)
+        let (fixed, _) = apply(&f[..1], &y, &fitted, &rec.time_h, None);
+        let left = (&fixed - &fitted).abs().max();
+        assert!(left < 10.0, "{left}");
+        // the structure-or-sensor test over that span calls it the exchange
+        let sens = DMatrix::from_fn(n, 4, |i, g| 0.1 * (g as f64 + 1.0) + 0.01 * (i % 7) as f64);
+        let (test, found) = attribute_span("SG1<->SG3", &inp, &sens, (f[0].from_row, f[0].to_row));
+        assert_eq!(test.verdict, "sensor", "{test:?}");
+        assert_eq!(found.map(|x| x.gauge_columns), Some(vec![0, 2]));
+        // dated without trusting the fit's map of the pair: also on a fit that learnt a
+        // mixture of the two strains (60 % exchanged), which the running sums misdate
+        let onset = |fit: &DMatrix<f64>| exchange_onset(&y, fit, (0, 2), 12).unwrap();
+        assert!(onset(&fitted).abs_diff(swap_at) <= 2, "{}", onset(&fitted));
+        let mixed = DMatrix::from_fn(n, 4, |i, g| 0.6 * truth(i, swap(g)) + 0.4 * truth(i, g));
+        assert!(onset(&mixed).abs_diff(swap_at) <= 2, "{}", onset(&mixed));
+        // fit and readings that agree: nothing either side
+        let agree = DMatrix::from_fn(n, 4, |i, g| truth(i, swap(g)) + wiggle(i, g));
+        let ra = &agree - &fitted;
+        let rec = record(agree);
+        let inp = ScanInput {
+            residual: &ra,
+            rec: &rec,
+            ..inp
+        };
+        assert!(exchange_candidates(&inp, &SensorConfig::default(), Side::Before).is_empty());
     }
 
     /// A fit whose window held a gain change absorbs part of it: its fitted values carry a

@@ -66,6 +66,37 @@ fn a_channel_exchange_is_undone_and_raises_no_gap_alarm() {
     }
 }
 
+/// Two channels exchanged from the first row and put right at hour 100 (a wiring mistake
+/// found on site): the change shows only before its hour, where no exchange from an hour to the
+/// end explains it. The loop finds it there, re-calibrates with the readings relabelled before
+/// and after the hour, and keeps the relabelling with the larger evidence: g2 and g5 exchanged
+/// over rows 0..100, the gap held, no gap alarm.
+#[test]
+fn an_exchange_put_right_early_is_undone_before_its_hour() {
+    let at = 100;
+    let mut rec = record_with(&ToyGate::default(), ROWS, 34, |_, _| 0.0).unwrap();
+    for i in 0..at {
+        rec.y.swap((i, 1), (i, 4));
+    }
+    let r = loop_on(&rec);
+    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
+    eprintln!("exchange before {at}: {:?}\n{}", s.findings, r.conclusion);
+    let f = s
+        .findings
+        .iter()
+        .find(|f| f.kind == SensorKind::ChannelExchange)
+        .unwrap_or_else(|| panic!("no exchange found: {:?}", s.findings));
+    assert_eq!(f.gauges, vec!["g2", "g5"]);
+    assert_eq!(f.from_row, 0, "{f:?}");
+    assert!(f.to_row.abs_diff(at) <= 2, "end row {}", f.to_row);
+    assert!(
+        !gap_alarm(&r),
+        "gap alarm for a wiring change: {:?}",
+        r.alarms
+    );
+    assert!(holds(&r, 90.0), "{:?}", r.theta_after);
+}
+
 /// A dead gauge (g4 reads 0 from hour 700): set aside from that hour, its cells left out of
 /// the error, no effect and no gap alarm for it.
 #[test]
