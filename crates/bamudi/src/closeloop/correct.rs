@@ -556,13 +556,14 @@ fn gap_alarm_guard(
                 }
                 break;
             }
-            // a one-gauge change within a day of a finding already applied on another gauge is
-            // one change on two gauges, the structure's doing (as among the post-selection
-            // findings): not applied, and the alarm stands
-            (Some(f), None) if round == 0 && coincides(&f, &post.findings) => {
-                post.coincident.push(f);
-                break;
-            }
+            // A one-gauge change within a day of a finding already applied on another gauge is
+            // one change on two gauges, which the post-selection findings leave alone
+            // (`one_gauge_at_a_time`); here it is applied all the same. Leaving it alone lets
+            // the alarm stand, and on the panel's lockage-lag and sun records from day 50
+            // (medium, large; seed 1000) that raised four gap alarms for a gap that did not
+            // change, one with an interval that misses it (90.37 ± 0.11 in for 90): the test
+            // has no answer for an operational or environmental effect that begins mid-record,
+            // and until it has, two wrong one-gauge steps cost the user less than a false alarm.
             (Some(f), None) if round == 0 => apply_more(lp, rec, post, &mut vec![f])?,
             _ => break,
         }
