@@ -38,17 +38,11 @@ pub(super) struct Relabelled {
 /// sensor's; an exchange found before its day is then re-calibrated both ways ([`relabel`]),
 /// and the scans after it read the calibration kept.
 pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Result<PrePass> {
-    let cfg = &lp.cfg.sensor;
-    let mut tests = vec![];
-    // the model's sensitivity to θ, once per calibration the tests run on (the first, and
-    // the relabelled one when there is one), computed when a test first needs it
-    let mut sens: [Option<DMatrix<f64>>; 2] = [None, None];
-    let mut confirmed = |st: &State, inp: &ScanInput<'_>, f: &SensorFinding| -> Result<_> {
-        let s = &mut sens[usize::from(!std::ptr::eq(st, first))];
-        if s.is_none() {
-            *s = Some(sensor::sensitivity(st.model.as_ref(), lp.x)?);
-        }
-        Ok(confirm(inp, s.as_ref().expect("set above"), f, &mut tests))
+    let mut tests = Tests {
+        x: lp.x,
+        first,
+        sens: [None, None],
+        run: vec![],
     };
     let r = lp.y - &first.mean;
     let inp = ScanInput {
@@ -58,14 +52,79 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Re
         unit: &lp.cfg.output_unit,
         earliest: 0,
     };
-    let mut found = sensor::stuck_scan(&inp, cfg);
-    let mut relabelled = None;
-    let taken = |f: &[SensorFinding], g: usize| f.iter().any(|x| x.gauge_columns.contains(&g));
-    for e in sensor::exchange_scan(&inp, cfg) {
-        if e.gauge_columns.iter().any(|&g| taken(&found, g)) {
+    let mut found = sensor::stuck_scan(&inp, &lp.cfg.sensor);
+    let relabelled = exchanges(lp, rec, &inp, &mut tests, &mut found)?;
+    let st = relabelled.as_ref().map_or(first, |b| &b.state);
+    let r = lp.y - &st.mean;
+    let inp = ScanInput {
+        residual: &r,
+        fitted: &st.mean,
+        ..inp
+    };
+    let coincident = later_scans(lp, rec, &inp, st, &mut tests, &mut found)?;
+    for f in &found {
+        log::info!("sensor finding: {}", f.describe());
+    }
+    Ok(PrePass {
+        findings: found,
+        tests: tests.run,
+        coincident,
+        relabelled,
+    })
+}
+
+/// Whether a finding among `f` already holds gauge `g`.
+fn taken(f: &[SensorFinding], g: usize) -> bool {
+    f.iter().any(|x| x.gauge_columns.contains(&g))
+}
+
+/// The structure-or-sensor tests the pass runs, and the model's sensitivity to `θ` for each
+/// calibration they run on (the first, and the relabelled one when there is one), computed
+/// when a test first needs it.
+struct Tests<'a> {
+    x: &'a DMatrix<f64>,
+    first: &'a State,
+    sens: [Option<DMatrix<f64>>; 2],
+    run: Vec<AttributionTest>,
+}
+
+impl Tests<'_> {
+    /// [`confirm`] on `st`'s residual (`inp`).
+    fn confirm(
+        &mut self,
+        st: &State,
+        inp: &ScanInput<'_>,
+        f: &SensorFinding,
+    ) -> Result<(Option<SensorFinding>, bool)> {
+        let s = &mut self.sens[usize::from(!std::ptr::eq(st, self.first))];
+        if s.is_none() {
+            *s = Some(sensor::sensitivity(st.model.as_ref(), self.x)?);
+        }
+        Ok(confirm(
+            inp,
+            s.as_ref().expect("set above"),
+            f,
+            &mut self.run,
+        ))
+    }
+}
+
+/// Channel exchanges on the first calibration's residual (`inp`), added to `found`: those from
+/// an onset to the end that the structure-or-sensor test confirms, then an exchange seen
+/// before its day, decided by re-calibration ([`relabel`]), whose calibration is returned.
+fn exchanges(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    inp: &ScanInput<'_>,
+    tests: &mut Tests<'_>,
+    found: &mut Vec<SensorFinding>,
+) -> Result<Option<Relabelled>> {
+    let (cfg, first) = (&lp.cfg.sensor, tests.first);
+    for e in sensor::exchange_scan(inp, cfg) {
+        if e.gauge_columns.iter().any(|&g| taken(found, g)) {
             continue;
         }
-        if let (Some(e), _) = confirmed(first, &inp, &e)? {
+        if let (Some(e), _) = tests.confirm(first, inp, &e)? {
             found.push(e);
         }
     }
@@ -73,44 +132,53 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Re
     // whose change the structure-or-sensor test calls a sensor's (any sensor hypothesis: a
     // learnt exchange can read as one gauge's gain), decided by re-calibration
     let mut before = vec![];
-    for e in sensor::exchange_candidates(&inp, cfg, sensor::Side::Before) {
+    for e in sensor::exchange_candidates(inp, cfg, sensor::Side::Before) {
         if before.len() == RELABEL_CANDIDATES {
             break;
         }
-        if e.gauge_columns.iter().any(|&g| taken(&found, g)) {
+        if e.gauge_columns.iter().any(|&g| taken(found, g)) {
             continue;
         }
-        if confirmed(first, &inp, &e)?.1 {
+        if tests.confirm(first, inp, &e)?.1 {
             before.push(e);
         }
     }
-    if !before.is_empty()
-        && let Some((e, st)) = relabel(lp, rec, first, &found, before)?
-    {
-        found.push(e);
-        relabelled = Some(st);
+    if before.is_empty() {
+        return Ok(None);
     }
-    let st = relabelled.as_ref().map_or(first, |b: &Relabelled| &b.state);
-    let r = lp.y - &st.mean;
-    let inp = ScanInput {
-        residual: &r,
-        fitted: &st.mean,
-        ..inp
-    };
+    Ok(relabel(lp, rec, first, found, before)?.map(|(e, st)| {
+        found.push(e);
+        st
+    }))
+}
+
+/// The scans after the exchanges, on calibration `st`'s residual (`inp`), added to `found`:
+/// the verdict's gains and offsets, noise increases, and gain changes one gauge at a time;
+/// returns the gain changes left alone because other gauges changed with them.
+fn later_scans(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    inp: &ScanInput<'_>,
+    st: &State,
+    tests: &mut Tests<'_>,
+    found: &mut Vec<SensorFinding>,
+) -> Result<Vec<SensorFinding>> {
+    let cfg = &lp.cfg.sensor;
     if let Some(v) = st.model.adequacy() {
-        for f in sensor::from_verdict(&inp, v) {
-            if !taken(&found, f.gauge_columns[0]) {
+        for f in sensor::from_verdict(inp, v) {
+            if !taken(found, f.gauge_columns[0]) {
                 found.push(f);
             }
         }
     }
     // the noise scan on the residual with those corrections (an exchanged pair's residual
     // carries the difference of their strains, which is not noise)
-    let (yc, _) = sensor::apply(&found, lp.y, &st.mean, &rec.time_h, None);
+    let (yc, _) = sensor::apply(found, lp.y, &st.mean, &rec.time_h, None);
     let rc = &yc - &st.mean;
     let inp = ScanInput {
         residual: &rc,
-        ..inp
+        fitted: inp.fitted,
+        ..*inp
     };
     let skip: Vec<usize> = found
         .iter()
@@ -126,21 +194,13 @@ pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Re
         .collect();
     let mut gains = vec![];
     for cand in sensor::gain_scan(&inp, cfg, &skip) {
-        if let (Some(f), _) = confirmed(st, &inp, &cand)? {
+        if let (Some(f), _) = tests.confirm(st, &inp, &cand)? {
             gains.push(f);
         }
     }
     let (gains, coincident) = one_gauge_at_a_time(gains);
     found.extend(gains);
-    for f in &found {
-        log::info!("sensor finding: {}", f.describe());
-    }
-    Ok(PrePass {
-        findings: found,
-        tests,
-        coincident,
-        relabelled,
-    })
+    Ok(coincident)
 }
 
 /// The structure-or-sensor test of finding `f` over its span (`sens`: the model's sensitivity):
