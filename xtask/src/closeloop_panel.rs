@@ -94,6 +94,10 @@ pub struct PanelArgs {
     /// JSON of every record.
     #[arg(long, default_value = "docs/results/closeloop-panel.json")]
     json: PathBuf,
+    /// Also write each record's whole report (`results.json` of `bamudi close-loop`) into this
+    /// folder as `<kind>-<magnitude>-<onset>-<seed>.json`, for reading one record in full.
+    #[arg(long)]
+    reports: Option<PathBuf>,
 }
 
 /// One record's score.
@@ -512,6 +516,11 @@ fn one(
     let out = close_loop(&rec, &calibrator, &cfg)?;
     let wall_s = t.elapsed().as_secs_f64();
     let r = &out.report;
+    if let Some(dir) = &args.reports {
+        std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
+        let path = dir.join(format!("{kind}-{magnitude}-{onset}-{seed}.json"));
+        write_atomic(&path, serde_json::to_string_pretty(r)?.as_bytes())?;
+    }
     let noise = fc.noise_sd_microstrain;
     let score = score(r, kind, magnitude, onset, seed, gap_end, noise, wall_s);
     eprintln!(
@@ -526,6 +535,7 @@ fn one(
         "theta_after": r.theta_after, "theta_before": r.theta_before,
         "effects": r.effects.iter().map(|e| (e.name.clone(), e.covariates.clone())).collect::<Vec<_>>(),
         "sensor": r.sensor, "alarms": r.alarms, "conclusion": r.conclusion,
+        "parameter_correction": r.parameter_correction,
     });
     Ok((score, j))
 }
@@ -631,18 +641,25 @@ fn score(
     }
 }
 
-/// The test window's RMSE over every gauge after the loop. A sensor correction that starts in
-/// the test window is fitted on its rows, so the out-of-sample figure leaves it out and an
-/// exchanged or stuck gauge there would count as error; the figure with every correction is
-/// taken instead (in-sample for that gauge and span; the report's `fitted_on_test_rows` says
-/// so). Gauges set aside on every test row (no value) are left out.
+/// The test window's RMSE over every gauge after the loop. A correction that starts in the
+/// test window is fitted on its rows, so the out-of-sample figure leaves it out and an
+/// exchanged or stuck gauge there, or a gap that changed there, would count as error; the
+/// figure with every correction is taken instead (in-sample for that span; the report says so:
+/// the sensor report's `fitted_on_test_rows`, the gap's `parameter_correction.
+/// fitted_on_error_rows`). The gap's correction is applied on top of the sensor corrections, so
+/// its figure holds both. Gauges set aside on every test row (no value) are left out.
 fn test_rmse(r: &CloseLoopReport) -> f64 {
-    let all = r
+    let gap = r
+        .parameter_correction
+        .as_ref()
+        .filter(|p| p.fitted_on_error_rows)
+        .map(|p| &p.error_rmse);
+    let sensor = r
         .sensor
         .as_ref()
         .filter(|s| s.fitted_on_test_rows)
         .and_then(|s| s.heldout_rmse_after_all_corrections.as_ref());
-    match all {
+    match gap.or(sensor) {
         Some(v) => {
             let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
             (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()

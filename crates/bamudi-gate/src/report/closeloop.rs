@@ -250,7 +250,40 @@ fn alarms_section(s: &mut String, r: &CloseLoopReport) {
         }
         s.push('\n');
     }
+    gap_correction(s, r);
     scan_details(s, r);
+}
+
+/// The gap's change applied as a correction (when its alarm stands).
+fn gap_correction(s: &mut String, r: &CloseLoopReport) {
+    let Some(p) = &r.parameter_correction else {
+        return;
+    };
+    let step = match (p.step_day, p.step_levels) {
+        (Some(d), Some((b, a))) => {
+            format!("its largest step on day {d:.2}, from {b:.2} to {a:.2} in")
+        }
+        _ => "no one-row step (the track's levels, interpolated)".into(),
+    };
+    let ok: Vec<f64> = p
+        .error_rmse
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .collect();
+    let rms = (ok.iter().map(|v| v * v).sum::<f64>() / ok.len().max(1) as f64).sqrt();
+    let _ = writeln!(
+        s,
+        "**The gap's change, applied:** every row predicted at the tracked gap, {step}. The \
+         error window's RMSE with it is {rms:.2} microstrain{}; the gauge alarms above are the \
+         scan with it ({} without it).\n",
+        if p.fitted_on_error_rows {
+            " (in-sample: the change starts in that window)"
+        } else {
+            ""
+        },
+        p.gauge_alarms_without
+    );
 }
 
 /// The whole-record event scan: every change of level left in a gauge's residual.

@@ -495,6 +495,8 @@ pub(super) struct PostPass {
     pub withheld_gap_alarm: Option<WithheldAlarm>,
     /// One-gauge findings dropped because other gauges changed at the same time.
     pub coincident: Vec<SensorFinding>,
+    /// The parameter's change applied as a correction, when the track's alarm stands.
+    pub parameter: Option<super::change::ParameterCorrection>,
 }
 
 /// The scan, the track, and the sensor findings after selection: each change of level on one
@@ -527,27 +529,33 @@ pub(super) fn post_pass(
         tests,
         withheld_gap_alarm: None,
         coincident,
+        parameter: None,
     };
     zero_masked(&mut post.residual, &post.mask);
     let (events, track) = super::whole_record(lp, rec, &post.st, &post.residual, &post.mask)?;
     post.events = events;
     post.track = track;
-    if !lp.cfg.sensor.enabled {
-        return Ok(post);
+    if lp.cfg.sensor.enabled {
+        sensor_findings(lp, rec, &mut post)?;
     }
+    post.parameter = super::change::apply(lp, rec, &mut post)?;
+    Ok(post)
+}
+
+/// The sensor findings after selection and the gap alarm's guard.
+fn sensor_findings(lp: &Loop<'_>, rec: &MeasuredRecord, post: &mut PostPass) -> Result<()> {
     let sens = sensor::sensitivity(post.st.model.as_ref(), lp.x)?;
-    let (mut added, tests) = scan_alarm_findings(lp, rec, &post, &sens);
+    let (mut added, tests) = scan_alarm_findings(lp, rec, post, &sens);
     post.tests.extend(tests);
-    let (gains, tests) = gain_findings(lp, rec, &post, &added, &sens);
+    let (gains, tests) = gain_findings(lp, rec, post, &added, &sens);
     post.tests.extend(tests);
     added.extend(gains);
     let (mut added, coincident) = one_gauge_at_a_time(added);
     post.coincident.extend(coincident);
     if !added.is_empty() {
-        apply_more(lp, rec, &mut post, &mut added)?;
+        apply_more(lp, rec, post, &mut added)?;
     }
-    gap_alarm_guard(lp, rec, &mut post, &sens)?;
-    Ok(post)
+    gap_alarm_guard(lp, rec, post, &sens)
 }
 
 /// The gap alarm guard. A change the sensor side explains better is corrected as that
@@ -792,7 +800,7 @@ fn apply_more(
 
 /// The final residual with the effects that change the parameter itself put back (the track's
 /// view: it replaces a parameter trend, and reads the data less the additive effects only).
-fn track_residual(lp: &Loop<'_>, post: &PostPass) -> Result<DMatrix<f64>> {
+pub(super) fn track_residual(lp: &Loop<'_>, post: &PostPass) -> Result<DMatrix<f64>> {
     let mut r = post.residual.clone();
     let contributions = lp.with_y(&post.y).contributions(&post.st)?;
     for (e, c) in post.st.effects.iter().zip(contributions) {
@@ -804,7 +812,7 @@ fn track_residual(lp: &Loop<'_>, post: &PostPass) -> Result<DMatrix<f64>> {
     Ok(r)
 }
 
-fn zero_masked(r: &mut DMatrix<f64>, mask: &DMatrix<bool>) {
+pub(super) fn zero_masked(r: &mut DMatrix<f64>, mask: &DMatrix<bool>) {
     for (v, m) in r.iter_mut().zip(mask.iter()) {
         if *m {
             *v = 0.0;

@@ -48,6 +48,7 @@
 //! assert!(out.report.effects.is_empty()); // pure noise: nothing to explain
 //! ```
 
+mod change;
 mod config;
 mod correct;
 mod effect;
@@ -64,6 +65,7 @@ pub mod testing;
 pub(crate) mod track;
 
 pub use crate::module3::posterior::ThetaSummary;
+pub use change::ParameterCorrection;
 pub use config::{CloseLoopConfig, LoadSpec};
 pub use effect::{
     Effect, EffectKind, EffectParameter, EffectReport, FitContext, Fitted, ParameterEnd, Term,
@@ -281,7 +283,9 @@ pub struct CloseLoopReport {
     /// The final calibration's adequacy verdict.
     #[serde(default)]
     pub model_adequacy_after: Option<crate::adequacy::AdequacyReport>,
-    /// Changes of level in the final residual over the whole record (`None` when disabled).
+    /// Changes of level in the final residual over the whole record, with the gap's change
+    /// applied when the track's alarm stands ([`Self::parameter_correction`]; `None` when
+    /// disabled).
     #[serde(default)]
     pub events: Option<EventScan>,
     /// The parameter tracked through the record (`None` when disabled).
@@ -291,6 +295,11 @@ pub struct CloseLoopReport {
     /// level (from [`Self::events`]) and the gap's change (from [`Self::theta_track`]).
     #[serde(default)]
     pub alarms: Vec<AlarmSummary>,
+    /// The gap's change applied as a correction when the track's change alarm stands: the
+    /// step it holds, the error window's RMSE with it, and the gauge alarms without it (the
+    /// `events` and `alarms` above are the scan's with it). `None` without a standing alarm.
+    #[serde(default)]
+    pub parameter_correction: Option<ParameterCorrection>,
     /// Wall time of the whole loop on this record (s).
     #[serde(default)]
     pub wall_time_s: f64,
@@ -932,6 +941,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         alarms: alarm_summaries(events.as_ref(), theta_track.as_ref(), unit),
         events,
         theta_track,
+        parameter_correction: post.parameter.clone(),
         wall_time_s: 0.0,
         sensor: sensor_report,
         theta_after_effect_sd: effect_sd,

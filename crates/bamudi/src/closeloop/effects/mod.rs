@@ -8,7 +8,7 @@ mod load_path;
 mod operational;
 mod stepwise;
 mod thermal;
-mod trend;
+pub(crate) mod trend;
 
 pub use basic::{GaugeDrift, GaugeOffset, OffsetJump};
 pub use generic::{Generic, Selection};

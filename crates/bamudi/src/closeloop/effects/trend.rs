@@ -24,7 +24,7 @@ pub struct ParameterTrend {
 
 /// `ctx.model` at the tracked `θ(t)` (clamped to `bounds`) minus the model's own mean.
 #[derive(Debug, Clone)]
-struct TrackTerm {
+pub(crate) struct TrackTerm {
     /// Window mid-times (hours) and smoothed levels, in time order.
     knots: Vec<(f64, f64)>,
     /// The filtered level and slope (per hour) at the last knot.
@@ -35,7 +35,7 @@ struct TrackTerm {
 impl TrackTerm {
     /// The term of `t`'s levels on the misfit's scale (the model's `θ` that fits each
     /// window, not the calibration's reading of it).
-    fn from_track(t: &ThetaTrack, bounds: (f64, f64)) -> Self {
+    pub(crate) fn from_track(t: &ThetaTrack, bounds: (f64, f64)) -> Self {
         let offset = t.offset();
         let knots = t
             .points
@@ -52,7 +52,7 @@ impl TrackTerm {
 
     /// `θ` at `t` hours: linear between knots, flat before the first, along the last filtered
     /// slope after the last.
-    fn theta_at(&self, t: f64) -> f64 {
+    pub(crate) fn theta_at(&self, t: f64) -> f64 {
         let (t_end, level, slope) = self.end;
         let th = if t >= t_end {
             level + slope * (t - t_end)
@@ -68,6 +68,13 @@ impl TrackTerm {
             }
         };
         th.clamp(self.bounds.0, self.bounds.1)
+    }
+}
+
+impl TrackTerm {
+    /// Window mid-times (hours) and levels, in time order.
+    pub(crate) fn knots(&self) -> &[(f64, f64)] {
+        &self.knots
     }
 }
 
