@@ -116,6 +116,19 @@ struct Score {
     /// For a gain, offset step or drift named by a sized sensor finding on the right gauge:
     /// whether the finding's 95 % interval (size ± 1.96 sd) holds the size written.
     size_held: Option<bool>,
+    /// Which corrections `rmse_ratio` was fitted with on the test rows too ([`test_rmse`]).
+    in_sample: InSample,
+}
+
+/// What the scored test error was fitted on ([`test_rmse`]).
+#[derive(Clone, Copy, PartialEq)]
+enum InSample {
+    /// Every correction fitted on rows before the test window.
+    No,
+    /// A sensor correction whose span reaches into the test window, fitted over the span.
+    Sensor,
+    /// The gap's change from the test window, fitted there.
+    Gap,
 }
 
 pub fn run(args: &PanelArgs) -> Result<()> {
@@ -257,6 +270,13 @@ fn score_of(j: &serde_json::Value) -> Result<Score> {
         wall_s: f("wall_time_s")?,
         named: s("named")?,
         size_held: size_held(j),
+        in_sample: if j["parameter_correction"]["fitted_on_error_rows"].as_bool() == Some(true) {
+            InSample::Gap
+        } else if j["sensor"]["fitted_on_test_rows"].as_bool() == Some(true) {
+            InSample::Sensor
+        } else {
+            InSample::No
+        },
     })
 }
 
@@ -531,6 +551,7 @@ fn one(
         "kind": kind, "magnitude": magnitude, "onset": onset, "seed": seed,
         "gap_truth_end": gap_end, "cause_named": score.cause, "named": score.named,
         "rmse_ratio": score.rmse_ratio, "covered": score.covered, "gap_alarm": score.gap_alarm,
+        "rmse_ratio_out_of_sample": r.heldout_rmse_total_after / noise,
         "false_finding": score.false_finding, "wall_time_s": wall_s,
         "theta_after": r.theta_after, "theta_before": r.theta_before,
         "effects": r.effects.iter().map(|e| (e.name.clone(), e.covariates.clone())).collect::<Vec<_>>(),
@@ -638,6 +659,7 @@ fn score(
         named: named(r),
         // read from the record's JSON line (`score_of`), like every score the table shows
         size_held: None,
+        in_sample: InSample::No,
     }
 }
 
@@ -734,6 +756,25 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
     s += &line(
         "all three",
         count(&|x| x.cause && x.rmse_ratio <= 1.5 && x.covered),
+    );
+    let passed: Vec<&&Score> = effect.iter().filter(|x| x.rmse_ratio <= 1.5).collect();
+    let gap = passed
+        .iter()
+        .filter(|x| x.in_sample == InSample::Gap)
+        .count();
+    let sensor = passed
+        .iter()
+        .filter(|x| x.in_sample == InSample::Sensor)
+        .count();
+    let _ = writeln!(
+        s,
+        "\nOf the {} records within 1.5x the noise, {} are scored on a figure whose corrections \
+         were fitted on the test rows too: {sensor} with a sensor correction whose span reaches \
+         into the test window (fitted over its whole span), {gap} with the gap's change from the \
+         test window (fitted there: no fit on earlier rows can hold it). The JSON lines keep \
+         each record's out-of-sample figure (`rmse_ratio_out_of_sample`) where it was recorded.",
+        passed.len(),
+        sensor + gap
     );
     let sized: Vec<bool> = effect.iter().filter_map(|x| x.size_held).collect();
     let (k, m) = (sized.iter().filter(|b| **b).count(), sized.len());

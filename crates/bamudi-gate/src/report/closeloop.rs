@@ -275,10 +275,10 @@ fn gap_correction(s: &mut String, r: &CloseLoopReport) {
     let _ = writeln!(
         s,
         "**The gap's change, applied:** every row predicted at the tracked gap, {step}. The \
-         error window's RMSE with it is {rms:.2} microstrain{}; the gauge alarms above are the \
-         scan with it ({} without it).\n",
+         error window's RMSE with it is {rms:.2} microstrain (in-sample: the track reads every \
+         row{}); the gauge alarms above are the scan with it ({} without it).\n",
         if p.fitted_on_error_rows {
-            " (in-sample: the change starts in that window)"
+            "; the change starts in that window, so no earlier fit can hold it"
         } else {
             ""
         },

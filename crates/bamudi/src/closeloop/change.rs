@@ -8,13 +8,13 @@
 //! is put in the model: every row is predicted at `θ(t)` from the track over the whole record
 //! (its smoothed levels, on the misfit's scale), and between two consecutive windows the rows
 //! get either the windows' interpolation or a one-row step from one window's level to the
-//! next, whichever fits them better (least squares: the step's row is the data's choice, and
-//! a change need not be the one the alarm dated; the CUSUM names only the first). The scan is
-//! re-run on the residual at `θ(t)` (the report's gauge alarms are then the gauges' own news),
-//! and the error window's RMSE with the change applied is reported. The track reads every row,
-//! so when the change starts in the error window that figure is in-sample
-//! (`fitted_on_error_rows`), as a sensor correction's
-//! starting there is.
+//! next, the step when it fits them better by more than choosing its row costs (least
+//! squares: the step's row is the data's choice, and a change need not be the one the alarm
+//! dated; the CUSUM names only the first). The scan is re-run on the residual at `θ(t)` (the
+//! report's gauge alarms are then the gauges' own news; those a sensor finding explains are
+//! kept), and the error window's RMSE with the change applied is reported. The track reads
+//! every row, so that figure is in-sample; `fitted_on_error_rows` says when the change itself
+//! starts in the error window, where no figure fitted on earlier rows can hold it.
 
 use super::correct::{PostPass, track_residual, zero_masked};
 use super::effects::trend::TrackTerm;
@@ -34,17 +34,20 @@ pub struct ParameterCorrection {
     pub step_day: Option<f64>,
     /// The parameter before and after that step (parameter units, the calibration's scale).
     pub step_levels: Option<(f64, f64)>,
-    /// Whether the change the alarm dates starts less than one track window before the error
-    /// window, so that the level after it is read on the error window's own rows: the figure
-    /// below is then in-sample. (Not the largest step's day: a growth's largest step is a
-    /// small one anywhere, and a change that began earlier is not the error window's own.)
+    /// Whether the change the alarm dates may start no earlier than one track window before
+    /// the error window (the low end of its 95 % onset interval), so that no fit on earlier
+    /// rows can hold it. (Not the largest step's day: a growth's largest step can be anywhere,
+    /// and a change that began earlier is not the error window's own.)
     pub fitted_on_error_rows: bool,
     /// RMSE per gauge on the error window with the change applied (output units); `NaN`
-    /// (JSON `null`) for a gauge set aside on every row of the window.
+    /// (JSON `null`) for a gauge set aside on every row of the window. Always in-sample: the
+    /// track reads every row, the error window's included.
     #[serde(deserialize_with = "nan_as_null::vec")]
     pub error_rmse: Vec<f64>,
-    /// Gauge alarms of the whole-record scan on the residual without the change; the report's
-    /// `events` are the scan with it.
+    /// Gauge alarms of the whole-record scan without the change (on the residual before the
+    /// sensor pass's corrections after selection, as the scan first ran); the report's
+    /// `events` are the scan with the change and those corrections, plus the first scan's
+    /// alarms a sensor finding explains.
     pub gauge_alarms_without: usize,
 }
 
@@ -61,18 +64,25 @@ pub(super) fn apply(
     let Some(track) = post.track.as_ref().filter(|t| t.alarm.is_some()) else {
         return Ok(None);
     };
-    let alarm_onset = track.alarm.as_ref().map_or(f64::NAN, |a| a.onset_day);
+    // the earliest onset the alarm allows: a change that may have begun before the error
+    // window is not the error window's own
+    let onset = track
+        .alarm
+        .as_ref()
+        .map_or(f64::NAN, |a| a.onset_day_interval.0);
     let model = post.st.model.as_ref();
     let term = TrackTerm::from_track(track, model.theta_bounds());
     let offset = track.anchor.as_ref().map_or(0.0, |a| a.offset);
+    let noise_var = track.noise_sd.powi(2);
     // the data less the additive effects, less the model at the calibrated θ
     let r_t = track_residual(lp, post)?;
-    let (theta, step) = theta_rows(lp, rec, post, &r_t, &term)?;
+    let (theta, step) = theta_rows(lp, rec, post, &r_t, &term, noise_var)?;
     let mut r = r_t - (model.predict_at_theta(lp.x, &theta)? - &post.st.mean);
     zero_masked(&mut r, &post.mask);
     let gauge_alarms_without = post.events.as_ref().map_or(0, |e| e.alarms.len());
     if lp.cfg.event_scan.enabled {
-        let scan = events::scan(rec, &r, &post.mask, lp.sel.len(), &lp.cfg.event_scan)?;
+        let mut scan = events::scan(rec, &r, &post.mask, lp.sel.len(), &lp.cfg.event_scan)?;
+        keep_sensor_alarms(&mut scan, post);
         post.events = Some(scan);
     }
     let rows = lp.error_rows();
@@ -82,16 +92,45 @@ pub(super) fn apply(
     Ok(Some(ParameterCorrection {
         step_day: step.map(|(t_h, _, _)| t_h / 24.0),
         step_levels: step.map(|(_, b, a)| (b - offset, a - offset)),
-        fitted_on_error_rows: alarm_onset > error_start - lp.cfg.track.window_hours / 24.0,
+        fitted_on_error_rows: onset > error_start - lp.cfg.track.window_hours / 24.0,
         error_rmse: sensor::rmse_unmasked(&r, rows, &post.mask),
         gauge_alarms_without,
     }))
 }
 
+/// The earlier scan's alarms that a sensor finding of the pass explains (same gauge, onset
+/// within a day of the finding's start) are kept in `scan`: the residual it reads is corrected
+/// for the finding, but a corrected fault is still news to the operator.
+fn keep_sensor_alarms(scan: &mut events::EventScan, post: &PostPass) {
+    let Some(before) = &post.events else {
+        return;
+    };
+    let explained = |a: &events::Alarm| {
+        post.findings
+            .iter()
+            .any(|f| f.gauges.contains(&a.gauge) && (f.from_day - a.onset_day).abs() <= 1.0)
+    };
+    let present = |s: &events::EventScan, a: &events::Alarm| {
+        s.alarms
+            .iter()
+            .any(|b| b.gauge == a.gauge && (b.onset_day - a.onset_day).abs() <= 1.0)
+    };
+    let kept: Vec<events::Alarm> = before
+        .alarms
+        .iter()
+        .filter(|a| explained(a) && !present(scan, a))
+        .cloned()
+        .collect();
+    scan.alarms.extend(kept);
+    scan.alarms
+        .sort_by(|a, b| a.onset_day.total_cmp(&b.onset_day));
+}
+
 /// `θ` at every row, and the largest one-row step it holds. Between two consecutive windows
 /// the rows get the windows' interpolation or a one-row step from the first window's level to
-/// the second's, whichever fits them better (least squares over the split rows; a step at
-/// a window's edge is the data's choice too); before the first window and after the last, the
+/// the second's (levels clamped to the prior's support), the step when it lowers the sum of
+/// squares by more than `2 ln(m)` noise variances (`noise_var`) for `m` possible split rows
+/// (a step at a window's edge is the data's choice too); before the first window and after the last, the
 /// track's term (its first level; the last filtered level along its slope). Three predictions
 /// of every row: at the interpolation, at the level before and at the level after.
 fn theta_rows(
@@ -100,8 +139,14 @@ fn theta_rows(
     post: &PostPass,
     r_t: &DMatrix<f64>,
     term: &TrackTerm,
+    noise_var: f64,
 ) -> Result<(Vec<f64>, Option<Step>)> {
-    let knots = term.knots();
+    let bounds = post.st.model.theta_bounds();
+    let knots: Vec<(f64, f64)> = term
+        .knots()
+        .iter()
+        .map(|&(h, v)| (h, v.clamp(bounds.0, bounds.1)))
+        .collect();
     let t = &rec.time_h;
     let mut theta: Vec<f64> = t.iter().map(|&h| term.theta_at(h)).collect();
     // the interval of each row: k when knots[k].0 <= t < knots[k + 1].0
@@ -152,7 +197,10 @@ fn theta_rows(
                 acc_hi += e_hi[rows[s]];
             }
         }
-        if best.0 >= interp {
+        // the split is the best of `rows.len() + 1`: it must gain what choosing among them
+        // costs, 2 ln(m) noise variances (the sensor pass's penalty for choosing among `m`)
+        let penalty = 2.0 * ((rows.len() + 1) as f64).ln() * noise_var;
+        if best.0 + penalty >= interp {
             continue;
         }
         let (before, after) = (knots[k].1, knots[k + 1].1);
