@@ -304,5 +304,8 @@ fn a_sudden_opening_on_an_as_built_gate_is_dated() {
             p.gauge_alarms_without
         );
     }
-    assert!(steps_dated >= 2, "{steps_dated} of 3 steps within a day of the opening");
+    assert!(
+        steps_dated >= 2,
+        "{steps_dated} of 3 steps within a day of the opening"
+    );
 }
