@@ -682,10 +682,7 @@ fn test_rmse(r: &CloseLoopReport) -> f64 {
         .filter(|s| s.fitted_on_test_rows)
         .and_then(|s| s.heldout_rmse_after_all_corrections.as_ref());
     match gap.or(sensor) {
-        Some(v) => {
-            let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
-            (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
-        }
+        Some(v) => bamudi::closeloop::rmse_over_gauges(v),
         None => r.heldout_rmse_total_after,
     }
 }

@@ -265,13 +265,7 @@ fn gap_correction(s: &mut String, r: &CloseLoopReport) {
         }
         _ => "no one-row step (the track's levels, interpolated)".into(),
     };
-    let ok: Vec<f64> = p
-        .error_rmse
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    let rms = (ok.iter().map(|v| v * v).sum::<f64>() / ok.len().max(1) as f64).sqrt();
+    let rms = bamudi::closeloop::rmse_over_gauges(&p.error_rmse);
     let _ = writeln!(
         s,
         "**The gap's change, applied:** every row predicted at the tracked gap, {step}. The \

@@ -177,14 +177,8 @@ fn correction_failure(out: &CloseLoopOutcome, at: f64, test_start: f64) -> Optio
         .filter(|a| a.subject != "parameter" && (a.onset_day - at).abs() <= 1.0)
         .map(|a| a.onset_day)
         .collect();
-    // a gauge set aside on the whole window has no value (NaN)
-    let ok: Vec<f64> = p
-        .error_rmse
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect();
-    let rms = (ok.iter().map(|v| v * v).sum::<f64>() / ok.len().max(1) as f64).sqrt();
+    // a gauge set aside on the whole window has no value (NaN): left out
+    let rms = bamudi::closeloop::rmse_over_gauges(&p.error_rmse);
     eprintln!(
         "opening at day {at}: step {:?} {:?}, error RMSE {rms:.2} (in-sample {}), gauge alarms {} \
          (without the correction {}), at the opening {gauge_alarms_at:?}",

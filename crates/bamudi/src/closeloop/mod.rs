@@ -679,9 +679,11 @@ fn feature_columns(lp: &Loop<'_>) -> Vec<(String, Vec<f64>)> {
         .collect()
 }
 
-/// The RMSE over every gauge from per-gauge RMSEs; a gauge set aside over the whole error
-/// window has no error (`NaN`) and is left out.
-fn rmse_total(v: &[f64]) -> f64 {
+/// The RMSE over every gauge from per-gauge RMSEs (the report's `heldout_rmse_total_*` from
+/// `heldout_rmse_*`, and the same total of `ParameterCorrection::error_rmse` or a sensor
+/// report's per-gauge figures); a gauge set aside over the whole error window has no error
+/// (`NaN`) and is left out; `0` when no gauge has one.
+pub fn rmse_over_gauges(v: &[f64]) -> f64 {
     let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
 }
@@ -925,8 +927,8 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         error_window: w.error_window,
         noise_sd_estimate: before.noise_sd,
         effects: st.effects.iter().map(|e| e.report.clone()).collect(),
-        heldout_rmse_total_before: rmse_total(&before.rmse),
-        heldout_rmse_total_after: rmse_total(&rmse_after),
+        heldout_rmse_total_before: rmse_over_gauges(&before.rmse),
+        heldout_rmse_total_after: rmse_over_gauges(&rmse_after),
         heldout_rmse_before: before.rmse,
         heldout_rmse_after: rmse_after,
         theta_before: before.theta,
