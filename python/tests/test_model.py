@@ -3,6 +3,7 @@ Rust example's numbers; the API's shapes, save/load, draws, threads; every error
 argument and the expected shape."""
 
 import json
+import math
 import os
 import pathlib
 import subprocess
@@ -40,9 +41,46 @@ def rust_example():
     return json.loads(out.strip().splitlines()[-1])
 
 
-def test_the_analytic_example_as_numpy_callables_is_the_rust_examples_posterior(cal):
+def rel(a, b):
+    return np.max(np.abs(np.asarray(a) - np.asarray(b)) / np.abs(np.asarray(b)))
+
+
+# The C library's exp, the Rust example's `f64::exp`. numpy's `np.exp` is its own SIMD routine on
+# machines with AVX-512 and differs from it in the last bit at a few of the 21 points (measured:
+# 1-2 points per θ, 5 of A's 126 entries); the engine's optimisers (GP fits, the ρ search) turn
+# that into a few 1e-6 of θ's posterior mean (3.8e-6 measured on such a machine). The
+# bit-for-bit check below therefore builds the example with this exp.
+LIBM_EXP = np.vectorize(math.exp, otypes=[float])
+
+
+@pytest.fixture(scope="module")
+def cal_libm():
+    a = analytic.sensor_matrix(LIBM_EXP)
+    model = bamudi.Model(lambda x, theta: x[:, :1] * LIBM_EXP(-theta[0] * analytic.POINTS)[None, :],
+                         coordinates=analytic.POINTS, inputs=["load_kn_per_m"],
+                         outputs=analytic.model.outputs, A=a,
+                         prior={"decay_per_m": bamudi.Uniform(0.5, 3.0)},
+                         discrepancy=bamudi.Discrepancy("legendre", terms=2, interval=(0.0, 1.0)))
+    return bamudi.calibrate(model, analytic.experiments(exp=LIBM_EXP), analytic.CONFIG)
+
+
+def test_the_example_with_numpys_exp_is_the_rust_examples_posterior_to_the_optimisers_tolerance(cal):
+    """The example as shipped (numpy's exp). Where numpy's exp is the C library's, this is the
+    bit-for-bit case below; where it is not, a last-bit difference of the data reaches θ
+    through the optimisers: 1e-4 relative is 25x the 3.8e-6 measured on an AVX-512 machine and
+    0.08 of θ's posterior sd (0.002 at 1.6), so a real disagreement (a different posterior)
+    still fails. (This bound replaced the 1e-9 one that failed on an AVX-512 machine; the 1e-9
+    claim is kept, with the exp it needs, in the next test.)"""
     rust = rust_example()
-    rel = lambda a, b: np.max(np.abs(np.asarray(a) - np.asarray(b)) / np.abs(np.asarray(b)))  # noqa: E731
+    (lo, hi), = cal.theta_ci95
+    ours = [cal.theta_mean[0], cal.theta_sd[0], lo, hi]
+    assert rel(ours, rust["theta"]) < 1e-4, (ours, rust["theta"])
+    assert rel(cal.rho_star, rust["rho_star"]) < 1e-4
+
+
+def test_the_analytic_example_as_numpy_callables_is_the_rust_examples_posterior(cal_libm):
+    rust = rust_example()
+    cal = cal_libm
     (lo, hi), = cal.theta_ci95
     ours = [cal.theta_mean[0], cal.theta_sd[0], lo, hi]
     assert rel(ours, rust["theta"]) < 1e-9, (ours, rust["theta"])
