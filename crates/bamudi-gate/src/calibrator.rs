@@ -183,6 +183,23 @@ impl GateCalibrator {
 
     /// Runs the calibration and returns the concrete model (the trait method boxes it).
     pub fn calibrate_gate(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<CalibratedGate> {
+        let (cal, exps, config) = self.run(x, y, Checks::Run)?;
+        let mut cal = cal;
+        crate::physics::add_physics_checks(&mut cal, &self.model, &exps, &config)?;
+        Ok(CalibratedGate {
+            model: Arc::clone(&self.model),
+            cal,
+        })
+    }
+
+    /// The calibration (Modules 2-3, and the adequacy checks with [`Checks::Run`]) with its
+    /// experiments and checked configuration.
+    fn run(
+        &self,
+        x: &DMatrix<f64>,
+        y: &DMatrix<f64>,
+        checks: Checks,
+    ) -> Result<(Calibration, Experiments, CalibrationConfig)> {
         if x.nrows() != y.nrows() {
             return Err(BamudiError::dim("rows of x vs rows of y", x.nrows(), y.nrows()).into());
         }
@@ -195,17 +212,15 @@ impl GateCalibrator {
         // the loop never predicts the baseline without discrepancy (its residuals, verdicts
         // and gap read the calibrated model): its fit at up to 400 support points is skipped
         params.no_discrepancy_fit = false;
+        // the checks run after Module 3 and change none of its numbers
+        params.adequacy.enabled &= checks == Checks::Run;
         let config = params.check()?;
         let mut run = Calibrate::new(&config);
         if let Some(o) = &self.observer {
             run = run.observer(o.as_ref());
         }
-        let mut cal = run.run(self.model.as_ref(), &exps)?;
-        crate::physics::add_physics_checks(&mut cal, &self.model, &exps, &config)?;
-        Ok(CalibratedGate {
-            model: Arc::clone(&self.model),
-            cal,
-        })
+        let cal = run.run(self.model.as_ref(), &exps)?;
+        Ok((cal, exps, config))
     }
 
     /// The loaded rows of `x`, `y`, evenly thinned to at most `max_experiments`.
@@ -256,6 +271,21 @@ fn thin_rows(n: usize, k: usize) -> Vec<usize> {
         .collect()
 }
 
+/// Whether a calibration runs its adequacy checks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Checks {
+    Run,
+    Skip,
+}
+
+/// The engine's error of an application error.
+fn engine_error(e: GateAppError) -> BamudiError {
+    match e {
+        GateAppError::Engine(e) => e,
+        e => BamudiError::Calibration(e.to_string()),
+    }
+}
+
 impl Calibrator for GateCalibrator {
     fn calibrate(
         &self,
@@ -264,9 +294,14 @@ impl Calibrator for GateCalibrator {
     ) -> bamudi::Result<Box<dyn CalibratedModel>> {
         match self.calibrate_gate(x, y) {
             Ok(m) => Ok(Box::new(m)),
-            Err(GateAppError::Engine(e)) => Err(e),
-            Err(e) => Err(BamudiError::Calibration(e.to_string())),
+            Err(e) => Err(engine_error(e)),
         }
+    }
+
+    /// Modules 2-3 only: no adequacy or physics checks (they change no number of Module 3).
+    fn calibrate_theta(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> bamudi::Result<ThetaSummary> {
+        let (cal, _, _) = self.run(x, y, Checks::Skip).map_err(engine_error)?;
+        Ok(cal.module3().posterior.summary(0))
     }
 }
 

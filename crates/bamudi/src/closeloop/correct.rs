@@ -840,8 +840,7 @@ pub(super) fn theta_without(
     }
     let raw = lp.with_y(&rec.y);
     let sum = raw.effect_sum(&post.st)?;
-    let (m, _, _) = raw.calibrate(&(&rec.y - sum))?;
-    Ok(Some(m.theta_summary()))
+    Ok(Some(raw.calibrate_theta(&(&rec.y - sum))?))
 }
 
 /// `θ` with the uncertainty of the accepted effects' and the corrections' parameters: for each
@@ -899,8 +898,8 @@ pub(super) fn propagate(
             ..post.st.clone()
         };
         let sum = lp.with_y(&ycorr).effect_sum(&drawn)?;
-        let (m, _, _) = lp.calibrate(&(&ycorr - sum))?;
-        dev2 += (m.theta_summary().mean - theta.mean).powi(2);
+        let drawn_theta = lp.calibrate_theta(&(&ycorr - sum))?;
+        dev2 += (drawn_theta.mean - theta.mean).powi(2);
     }
     let extra = (dev2 / cfg.uncertainty_draws as f64).sqrt();
     let sd = (theta.sd.powi(2) + extra * extra).sqrt();

@@ -162,6 +162,13 @@ pub trait CalibratedModel: Send + Sync + std::fmt::Debug + std::any::Any {
 pub trait Calibrator: Sync {
     /// Runs the calibration.
     fn calibrate(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<Box<dyn CalibratedModel>>;
+    /// The posterior summary of `θ` alone, for the loop's re-calibrations that read nothing
+    /// else (the bootstrap draws of `θ`'s uncertainty, `θ` without the sensor corrections).
+    /// It must equal `calibrate(x, y)?.theta_summary()`; an implementation may skip what
+    /// does not change `θ` (checks, reports). Default: exactly that.
+    fn calibrate_theta(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<ThetaSummary> {
+        Ok(self.calibrate(x, y)?.theta_summary())
+    }
 }
 
 /// Score of one candidate at one step.

@@ -96,6 +96,15 @@ impl Loop<'_> {
         Ok((Arc::from(model), mean, var))
     }
 
+    /// `θ`'s posterior summary of a calibration on `y_adj`'s calibration rows, without the
+    /// model or its predictions ([`Calibrator::calibrate_theta`]).
+    pub(super) fn calibrate_theta(&self, y_adj: &DMatrix<f64>) -> Result<ThetaSummary> {
+        self.calibrator.calibrate_theta(
+            &select_rows(self.x, self.cal),
+            &select_rows(y_adj, self.cal),
+        )
+    }
+
     fn context<'s>(&'s self, st: &'s State) -> FitContext<'s> {
         self.context_on(st, self.cal)
     }
