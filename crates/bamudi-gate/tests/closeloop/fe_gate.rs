@@ -119,19 +119,37 @@ fn run_measured(
 #[test]
 fn fe_gate_theta_only_calibration_is_the_full_calibrations_theta() {
     let c = contact();
-    let fx = FieldEffects::default().with_preset("thermal", 130.0).unwrap();
+    let fx = FieldEffects::default()
+        .with_preset("thermal", 130.0)
+        .unwrap();
     let rec = gate::simulate_field(&record_config(SEED, fx), c).unwrap();
     let cal = test_calibrator(c);
     let data = gate::as_measured(&rec, cal.model(), "fe_gate.csv").unwrap();
     let rows = 0..data.x.nrows() / 2;
-    let (x, y) = (data.x.rows_range(rows.clone()).into_owned(), data.y.rows_range(rows).into_owned());
+    let (x, y) = (
+        data.x.rows_range(rows.clone()).into_owned(),
+        data.y.rows_range(rows).into_owned(),
+    );
     let full = cal.calibrate(&x, &y).unwrap();
-    assert!(full.adequacy().is_some(), "the full calibration runs its checks");
+    assert!(
+        full.adequacy().is_some(),
+        "the full calibration runs its checks"
+    );
     let full = full.theta_summary();
     let only = cal.calibrate_theta(&x, &y).unwrap();
     assert_eq!(
-        (full.mean.to_bits(), full.sd.to_bits(), full.ci95.0.to_bits(), full.ci95.1.to_bits()),
-        (only.mean.to_bits(), only.sd.to_bits(), only.ci95.0.to_bits(), only.ci95.1.to_bits()),
+        (
+            full.mean.to_bits(),
+            full.sd.to_bits(),
+            full.ci95.0.to_bits(),
+            full.ci95.1.to_bits()
+        ),
+        (
+            only.mean.to_bits(),
+            only.sd.to_bits(),
+            only.ci95.0.to_bits(),
+            only.ci95.1.to_bits()
+        ),
         "{full:?} vs {only:?}"
     );
 }
