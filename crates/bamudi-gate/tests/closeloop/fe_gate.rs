@@ -10,7 +10,7 @@
 //! passed at full size too; the bounds below were not changed with it.
 
 use super::*;
-use bamudi::closeloop::{CalibratedModel, Calibrator, EffectReport, MeasuredRecord, SensorKind};
+use bamudi::closeloop::{Calibrator, EffectReport, MeasuredRecord, SensorKind};
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
 use bamudi_gate::session::ToleranceSpec;
