@@ -166,6 +166,17 @@ pub trait Calibrator: Sync {
     /// else (the bootstrap draws of `θ`'s uncertainty, `θ` without the sensor corrections).
     /// It must equal `calibrate(x, y)?.theta_summary()`; an implementation may skip what
     /// does not change `θ` (checks, reports). Default: exactly that.
+    ///
+    /// ```
+    /// use bamudi::closeloop::{Calibrator, testing::{GridCalibrator, ToyGate}};
+    /// let gate = ToyGate::default();
+    /// let rows = [[540.0, 180.0], [500.0, 180.0], [400.0, 180.0]];
+    /// let x = nalgebra::DMatrix::from_fn(3, 2, |i, j| rows[i][j]);
+    /// let y = nalgebra::DMatrix::from_fn(3, 7, |i, g| gate.strain(rows[i][0], rows[i][1], 90.0)[g]);
+    /// let cal = GridCalibrator::new(gate, (40.0, 200.0));
+    /// let theta = cal.calibrate_theta(&x, &y).unwrap();
+    /// assert_eq!(theta.mean, cal.calibrate(&x, &y).unwrap().theta_summary().mean);
+    /// ```
     fn calibrate_theta(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<ThetaSummary> {
         Ok(self.calibrate(x, y)?.theta_summary())
     }
@@ -690,6 +701,12 @@ fn feature_columns(lp: &Loop<'_>) -> Vec<(String, Vec<f64>)> {
 /// `heldout_rmse_*`, and the same total of `ParameterCorrection::error_rmse` or a sensor
 /// report's per-gauge figures); a gauge set aside over the whole error window has no error
 /// (`NaN`) and is left out; `0` when no gauge has one.
+///
+/// ```
+/// let per_gauge = [3.0, f64::NAN, 4.0]; // microstrain; the second gauge set aside
+/// let total = bamudi::closeloop::rmse_over_gauges(&per_gauge);
+/// assert!((total - 12.5f64.sqrt()).abs() < 1e-12);
+/// ```
 pub fn rmse_over_gauges(v: &[f64]) -> f64 {
     let ok: Vec<f64> = v.iter().copied().filter(|x| x.is_finite()).collect();
     (ok.iter().map(|x| x * x).sum::<f64>() / ok.len().max(1) as f64).sqrt()
