@@ -183,8 +183,7 @@ impl GateCalibrator {
 
     /// Runs the calibration and returns the concrete model (the trait method boxes it).
     pub fn calibrate_gate(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> Result<CalibratedGate> {
-        let (cal, exps, config) = self.run(x, y, Checks::Run)?;
-        let mut cal = cal;
+        let (mut cal, exps, config) = self.run(x, y, Checks::Run)?;
         crate::physics::add_physics_checks(&mut cal, &self.model, &exps, &config)?;
         Ok(CalibratedGate {
             model: Arc::clone(&self.model),
@@ -278,6 +277,11 @@ enum Checks {
     Skip,
 }
 
+/// The gap's summary of a calibration's grid posterior.
+fn theta_summary(cal: &Calibration) -> ThetaSummary {
+    cal.module3().posterior.summary(0)
+}
+
 /// The engine's error of an application error.
 fn engine_error(e: GateAppError) -> BamudiError {
     match e {
@@ -301,7 +305,7 @@ impl Calibrator for GateCalibrator {
     /// Modules 2-3 only: no adequacy or physics checks (they change no number of Module 3).
     fn calibrate_theta(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> bamudi::Result<ThetaSummary> {
         let (cal, _, _) = self.run(x, y, Checks::Skip).map_err(engine_error)?;
-        Ok(cal.module3().posterior.summary(0))
+        Ok(theta_summary(&cal))
     }
 }
 
@@ -375,7 +379,7 @@ impl CalibratedModel for CalibratedGate {
     }
 
     fn theta_summary(&self) -> ThetaSummary {
-        self.cal.module3().posterior.summary(0)
+        theta_summary(&self.cal)
     }
 
     fn theta_bounds(&self) -> (f64, f64) {
