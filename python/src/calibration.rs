@@ -124,6 +124,18 @@ impl Calibration {
         self.cal.module3().posterior.ci95()[0]
     }
 
+    /// The posterior probability that the data hold no discrepancy the model lacks, when the
+    /// calibrations with and without one were weighed by their evidence (the default; the
+    /// predictions mix the two with this weight); `None` otherwise.
+    #[getter]
+    fn probability_without(&self) -> Option<f64> {
+        self.cal
+            .module3()
+            .averaged
+            .as_ref()
+            .map(|a| a.probability_without)
+    }
+
     /// The Module-2 scale ρ* (Eq. 30).
     #[getter]
     fn rho_star(&self) -> f64 {

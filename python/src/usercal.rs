@@ -393,6 +393,18 @@ impl ModelCalibration {
     fn theta_ci95(&self) -> Vec<(f64, f64)> {
         self.cal.module3().posterior.ci95()
     }
+
+    /// The posterior probability that the data hold no discrepancy the model lacks, when the
+    /// calibrations with and without one were weighed by their evidence (the default; the
+    /// predictions mix the two with this weight); `None` otherwise.
+    #[getter]
+    fn probability_without(&self) -> Option<f64> {
+        self.cal
+            .module3()
+            .averaged
+            .as_ref()
+            .map(|a| a.probability_without)
+    }
     /// `P(θ_j <= t | data)` (the grid CDF, linear between nodes, or the share of MCMC draws).
     fn theta_cdf(&self, j: usize, t: f64) -> PyResult<f64> {
         if j >= self.desc.parameters.len() {

@@ -173,6 +173,12 @@ def test_the_marginal_mode_gives_rho_draws_and_a_verdict(data):
     mean, sd = c.rho_posterior
     assert abs(d["rho"].mean() - mean) < 0.1 * sd + 4 * sd / np.sqrt(2000)
     assert c.verdict in ("adequate", "inadequate")
+    # the default weighs the calibrations with and without a discrepancy by their evidence;
+    # assumed, or in another mode, there is no such weight
+    assert 0.0 <= c.probability_without <= 1.0
+    assumed = bamudi.calibrate(analytic.model, data, {**config, "marginal": {"presence": "assumed"}}, seed=5)
+    assert assumed.probability_without is None
+    assert assumed.theta_mean[0] == c.theta_mean[0]  # the gap's posterior is not weighed
 
 
 def test_two_threads_calibrate_with_callbacks_at_once(data, cal):

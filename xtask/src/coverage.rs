@@ -79,6 +79,10 @@ pub struct CoverageArgs {
     /// to the process variance (0: a zero-mean prior).
     #[arg(long, default_value_t = bamudi::params::DEFAULT_LEVEL_VARIANCE)]
     level_variance: f64,
+    /// Marginal mode: assumed (the model with a discrepancy is the answer) or weighed (the
+    /// models with and without one weighed by their evidence, the answer their mixture).
+    #[arg(long, default_value = "weighed")]
+    presence: String,
     /// Prior range of ρ, `LO,HI` (the sampling rule's `rho_range`; default `0,1.2`). A narrow
     /// range around the truth's 0.8 tells how much of the θ error comes through ρ.
     #[arg(long, value_delimiter = ',')]
@@ -192,6 +196,8 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
             })?,
         level_variance: a.level_variance,
         fixed: None,
+        presence: serde_json::from_value(serde_json::Value::String(a.presence.clone()))
+            .with_context(|| format!("--presence {}: expected assumed or weighed", a.presence))?,
     };
     Ok(o)
 }

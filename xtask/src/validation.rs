@@ -9,6 +9,11 @@
 //!    2 and 4 times its size, tapered, normal only, tangential only, none, and two shapes of
 //!    files none of the library's shapes resembles), `θ*` from the prior, fresh noise and
 //!    levels per replicate; the paper's shape and none also at the paper's size.
+//!    Each panel part runs twice on the same replicates: with the default
+//!    (`presence = "weighed"`: the predictions weigh the calibrations with and without a
+//!    discrepancy by their evidence) and as `assumed-<part>` with the discrepancy assumed. The
+//!    SBC parts calibrate with the discrepancy assumed: their data always hold one, drawn from
+//!    the prior the calibration states.
 //!
 //! Every part is one coverage study (`bamudi_gate::coverage`) written to
 //! `<out>/<part>.json` as it finishes (with the running log `<part>.json.partial.jsonl`
@@ -17,6 +22,7 @@
 //! run after the parts) writes `<out>/../validation.md` from whatever parts exist.
 
 use anyhow::{Context, Result, bail};
+use bamudi::DiscrepancyPresence;
 use bamudi_gate::coverage::{
     CorrectionSummary, CoverageOptions, CoverageReport, DiscrepancyShape, GeneratingHyper,
     SbcOptions, ScenarioCoverage,
@@ -104,41 +110,64 @@ fn parts(a: &ValidationArgs) -> Vec<Part> {
         ("normal-only", DiscrepancyShape::PaperNormal, 1.0),
         ("tangential-only", DiscrepancyShape::PaperTangential, 1.0),
     ];
-    for (name, shape, scale) in shapes {
-        let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
-        (o.discrepancy, o.discrepancy_scale) = (shape, scale);
-        out.push(Part {
-            name: format!("panel-{name}"),
-            opts: o,
-            group: "panel",
-        });
-    }
-    for file in ["bulge.csv", "tilt.toml"] {
-        let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
-        o.discrepancy_file = Some(a.out.join("shapes").join(file));
-        out.push(Part {
-            name: format!("panel-file-{}", file.split('.').next().unwrap_or(file)),
-            opts: o,
-            group: "panel",
-        });
-    }
-    for (name, shape) in [
-        ("paper", DiscrepancyShape::Paper),
-        ("none", DiscrepancyShape::None),
-    ] {
-        let o = CoverageOptions {
-            modes: vec![bamudi::CoefficientMode::Marginal],
-            seed: PAPER_SEED,
-            n_replicates: a.paper_replicates,
-            threads: a.threads,
-            discrepancy: shape,
-            ..CoverageOptions::paper_exact()
+    // each panel part twice: the default (the discrepancy weighed by evidence) and with the
+    // discrepancy assumed (the alternative, on the same seeds and replicates)
+    let presences = [
+        ("", DiscrepancyPresence::Weighed),
+        ("assumed-", DiscrepancyPresence::Assumed),
+    ];
+    for (prefix, presence) in presences {
+        let panel = if prefix.is_empty() {
+            "panel"
+        } else {
+            "assumed-panel"
         };
-        out.push(Part {
-            name: format!("paper-size-{name}"),
-            opts: o,
-            group: "paper-size",
-        });
+        for (name, shape, scale) in shapes {
+            let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
+            (o.discrepancy, o.discrepancy_scale) = (shape, scale);
+            o.marginal.presence = presence;
+            out.push(Part {
+                name: format!("{prefix}panel-{name}"),
+                opts: o,
+                group: panel,
+            });
+        }
+        for file in ["bulge.csv", "tilt.toml"] {
+            let mut o = quick(PANEL_SEED, a.replicates.unwrap_or(100));
+            o.discrepancy_file = Some(a.out.join("shapes").join(file));
+            o.marginal.presence = presence;
+            out.push(Part {
+                name: format!(
+                    "{prefix}panel-file-{}",
+                    file.split('.').next().unwrap_or(file)
+                ),
+                opts: o,
+                group: panel,
+            });
+        }
+        for (name, shape) in [
+            ("paper", DiscrepancyShape::Paper),
+            ("none", DiscrepancyShape::None),
+        ] {
+            let mut o = CoverageOptions {
+                modes: vec![bamudi::CoefficientMode::Marginal],
+                seed: PAPER_SEED,
+                n_replicates: a.paper_replicates,
+                threads: a.threads,
+                discrepancy: shape,
+                ..CoverageOptions::paper_exact()
+            };
+            o.marginal.presence = presence;
+            out.push(Part {
+                name: format!("{prefix}paper-size-{name}"),
+                opts: o,
+                group: if prefix.is_empty() {
+                    "paper-size"
+                } else {
+                    "assumed-paper-size"
+                },
+            });
+        }
     }
     out
 }
@@ -305,6 +334,25 @@ fn panel_verdict(s: &ScenarioCoverage) -> String {
     }
 }
 
+/// The median [smallest, largest] `P(M_0 | y)` over the replicates, `–` when not weighed.
+fn probability_without(s: &ScenarioCoverage) -> String {
+    let mut p: Vec<f64> = s
+        .replicates
+        .iter()
+        .filter_map(|r| r.probability_without)
+        .collect();
+    if p.is_empty() {
+        return "–".into();
+    }
+    p.sort_by(f64::total_cmp);
+    format!(
+        "{:.2} [{:.0e}, {:.2}]",
+        p[p.len() / 2],
+        p[0],
+        p[p.len() - 1]
+    )
+}
+
 fn nt(v: bamudi_gate::baselines::NormalTangential, p: usize) -> String {
     format!("{:.*} / {:.*}", p, v.normal, p, v.tangential)
 }
@@ -347,20 +395,29 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
             "paper-size",
             "Part 2 at the paper's size (500 experiments, 12-in mesh)",
         ),
+        (
+            "assumed-panel",
+            "Part 2 with the discrepancy assumed (`presence = \"assumed\"`; quick size)",
+        ),
+        (
+            "assumed-paper-size",
+            "Part 2 with the discrepancy assumed, at the paper's size",
+        ),
     ] {
         md.push_str(&format!("\n## {title}\n\n"));
-        md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage.\n\n");
-        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % | θ against the bounds |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        md.push_str("θ: coverage of the central intervals (**miss**: outside the 1 % binomial acceptance region), mean / sd of z = (posterior mean − θ*)/sd. Force (lbf/in, normal / tangential, medians over replicates): (b) the best calibration without a discrepancy, (c) the default's corrected force, (g) the floor for this θ posterior; δ̂ / δ the reconstructed discrepancy's RMSE over the true δ's RMS (its floor in brackets); bands: 95 % force band coverage and median half-width over the true δ's RMS; ρ⊥: the identified ρ's 95 % coverage; P(no δ): the median [smallest, largest] posterior probability of no discrepancy over the replicates (`–`: not weighed).\n\n");
+        md.push_str("| shape | scenario | R | θ 50 / 90 / 95 % | θ z mean / sd | (b) | (c) | (g) | (c)/(b) | δ̂ / δ [floor] | band coverage | half-width / δ | ρ⊥ 95 % | P(no δ) | θ against the bounds |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
         for part in all.iter().filter(|p| p.group == group) {
             let Some(read) = read(&out.join(format!("{}.json", part.name)))? else {
                 md.push_str(&format!(
-                    "| {} | not run | | | | | | | | | | | | |\n",
+                    "| {} | not run | | | | | | | | | | | | | |\n",
                     part.name
                 ));
                 continue;
             };
             let short = part
                 .name
+                .trim_start_matches("assumed-")
                 .trim_start_matches("panel-")
                 .trim_start_matches("paper-size-");
             let name = label(short, &read);
@@ -368,7 +425,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                 let c: Option<&CorrectionSummary> = s.correction.as_ref();
                 let cell = |f: &dyn Fn(&CorrectionSummary) -> String| c.map_or("–".into(), f);
                 md.push_str(&format!(
-                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    "| {} | {} | {} | {} / {} / {} | {:+.2} / {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                     name,
                     s.name,
                     s.n_replicates,
@@ -395,6 +452,7 @@ fn render(out: &Path, all: &[Part]) -> Result<String> {
                         .rho_projection
                         .as_ref()
                         .map_or("–".into(), |r| format!("{:.2}", r.coverage_95.rate))),
+                    probability_without(s),
                     panel_verdict(s),
                 ));
             }

@@ -54,6 +54,6 @@ pub use module3::posterior::{SupportPolicy, ThetaPosterior};
 pub use module4::{Band, DrawPaths, Predictor};
 pub use params::{
     CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode, CoefficientScales,
-    EstimatorParams, MarginalPrior, Marginalisation, McmcConfig, RhoSearch, RidgeParams,
-    SamplingRule,
+    DiscrepancyPresence, EstimatorParams, MarginalPrior, Marginalisation, McmcConfig, RhoSearch,
+    RidgeParams, SamplingRule,
 };

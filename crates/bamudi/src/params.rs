@@ -393,6 +393,40 @@ pub struct MarginalPrior {
     /// assert!(e.to_string().contains("marginal.fixed"), "{e}");
     /// ```
     pub fixed: Option<FixedHyper>,
+    /// Whether the data may say there is no discrepancy at all
+    /// ([`crate::module3::average`]): [`DiscrepancyPresence::Weighed`] (the default) weighs the
+    /// model with the discrepancy against the calibration without one by their evidence and
+    /// predicts with the two models' mixture; [`DiscrepancyPresence::Assumed`] keeps the model
+    /// with it.
+    ///
+    /// ```
+    /// use bamudi::params::DiscrepancyPresence;
+    /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\npresence = \"assumed\"").unwrap();
+    /// assert_eq!(cfg.into_params().marginal.presence, DiscrepancyPresence::Assumed);
+    /// let default = bamudi::CalibrationConfig::from_toml_str("").unwrap().into_params();
+    /// assert_eq!(default.marginal.presence, DiscrepancyPresence::Weighed);
+    /// ```
+    pub presence: DiscrepancyPresence,
+}
+
+/// Whether Module 4's predictions assume a discrepancy ([`MarginalPrior::presence`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DiscrepancyPresence {
+    /// The model with the discrepancy is the answer. Simulation-based calibration, whose data
+    /// always hold a discrepancy drawn from its prior, checks this posterior.
+    Assumed,
+    /// The models with and without a discrepancy weighed by their evidence, the answer their
+    /// mixture ([`crate::module3::average`]). Needs the no-discrepancy fit
+    /// ([`CalibrationParams::no_discrepancy_fit`]) and a one-dimensional `θ` (a grid
+    /// posterior carries its evidence); otherwise the model with the discrepancy is the answer.
+    /// The default: on truths without a discrepancy, or with one below the gauges' resolution,
+    /// the discrepancy model's `θ` posterior is several times wider than the data need and,
+    /// near the gap's edge, its corrected force 2.6-9.6x worse than the fit without one
+    /// (`docs/results/validation.md` has both panels side by side). The weighing enters the
+    /// predictions; the gap's posterior stays the discrepancy model's.
+    #[default]
+    Weighed,
 }
 
 /// Hyper-parameters of the marginal mode held at given values ([`MarginalPrior::fixed`]).
@@ -443,6 +477,7 @@ impl Default for MarginalPrior {
             kernel: CoefficientKernel::Matern52,
             level_variance: DEFAULT_LEVEL_VARIANCE,
             fixed: None,
+            presence: DiscrepancyPresence::default(),
         }
     }
 }

@@ -709,3 +709,133 @@ fn response_moments_are_the_bands_moments() {
         }
     }
 }
+
+/// The evidence weighing of the models with and without a discrepancy
+/// ([`bamudi::module3::average`]) on the beam, marginal mode:
+///
+/// * on strains the model class holds (`ρ A g(θ*) + b + noise`, no discrepancy) it gives the
+///   model without one the larger weight, and the mixture's `θ` is nearly that model's,
+///   narrower than the discrepancy model's; every prediction is the two models' mixture with
+///   these weights;
+/// * on the beam's records with a discrepancy the weight without one is negligible, and the
+///   answer is bit for bit the one of a calibration that assumes a discrepancy.
+#[test]
+fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it() {
+    use bamudi::params::DiscrepancyPresence;
+    use bamudi::{Calibrate, EstimatorParams, MarginalPrior};
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let names = (
+        model.unobservable.input_names(),
+        model.observable.output_names(),
+    );
+    let (theta_true, rho_true) = (12.3, 0.9);
+    let (x, with_delta) = beam_app::simulate(40, theta_true, rho_true, 1.0, 17);
+    // the same loads, strains from the model class itself
+    let mut rng = beam_app::Normal64::new(23);
+    let mut clean = DMatrix::zeros(x.nrows(), with_delta.ncols());
+    for i in 0..x.nrows() {
+        let row = model
+            .model_row(&[x[(i, 0)], x[(i, 1)]], &[theta_true])
+            .unwrap();
+        let n_o = row.len() / 2;
+        for q in 0..n_o {
+            clean[(i, q)] = rho_true * row[q] + row[n_o + q] + rng.normal();
+        }
+    }
+    let calibrate = |y: &DMatrix<f64>, presence| {
+        let exps =
+            Experiments::new(names.0.clone(), names.1.clone(), x.clone(), y.clone()).unwrap();
+        let cfg = CalibrationParams::default()
+            .estimator(EstimatorParams::ExactLinear)
+            .theta_grid_points(41)
+            .marginal(MarginalPrior {
+                presence,
+                ..MarginalPrior::default()
+            })
+            .check()
+            .unwrap();
+        Calibrate::new(&cfg).run(&model, &exps).unwrap()
+    };
+    let loads = [[1500.0, 20.0], [8000.0, 90.0]];
+
+    // no discrepancy in the data
+    let weighed = calibrate(&clean, DiscrepancyPresence::Weighed);
+    let assumed = calibrate(&clean, DiscrepancyPresence::Assumed);
+    let avg = weighed.module3().averaged.as_ref().expect("weighed");
+    let p0 = avg.probability_without;
+    // Under no discrepancy, p0 < 1/2 needs the discrepancy model to gain more than its penalty
+    // (½ ln N_s per hyper-parameter, 2 of them: ln 280 = 5.6 nats) by fitting noise: for two
+    // nested parameters 2 x gain is about χ²(2), beyond 11.3 with probability 0.4 %.
+    assert!(p0 > 0.5, "P(no discrepancy) = {p0}");
+    let (answer, with) = (
+        avg.posterior.summary(0),
+        weighed.module3().posterior.summary(0),
+    );
+    // 4 sd: a calibrated posterior misses by more with probability 6e-5
+    assert!(
+        (answer.mean - theta_true).abs() < 4.0 * answer.sd,
+        "{answer:?}"
+    );
+    assert!(answer.sd < with.sd, "answer {answer:?} vs with {with:?}");
+    // the predictions are the mixture: mean (1 − p0) m1 + p0 m0, m1 the calibration that
+    // assumes a discrepancy (the same Modules 2-3), m0 the fit without one
+    let (p_w, p_a) = (
+        weighed.predictor(&model).unwrap(),
+        assumed.predictor(&model).unwrap(),
+    );
+    assert_eq!(p_w.probability_without(), p0);
+    for xi in loads {
+        let m1 = p_a.response(&xi).unwrap().mean;
+        let m0 = p_w.no_discrepancy_response(&xi).unwrap().mean;
+        let (mean, _) = p_w.response_moments(&xi).unwrap();
+        for ((m, a), b) in mean.iter().zip(&m1).zip(&m0) {
+            let want = (1.0 - p0) * a + p0 * b;
+            // a sum of a few hundred weighted terms in another order: rounding only
+            assert!(
+                (m - want).abs() <= 1e-9 * (a.abs() + b.abs() + 1.0),
+                "{m} vs {want}"
+            );
+        }
+        // the discrepancy is zero with probability p0
+        let d1 = p_a.discrepancy(&xi).unwrap().mean;
+        let d = p_w.discrepancy(&xi).unwrap().mean;
+        for (d, d1) in d.iter().zip(&d1) {
+            assert!((d - (1.0 - p0) * d1).abs() <= 1e-12 * (d1.abs() + 1.0));
+        }
+        // joint draws follow the same mixture: their mean within 5 standard errors
+        let draws = p_w.response_draws(&xi, 4000, 5).unwrap();
+        let band = p_w.response(&xi).unwrap();
+        for j in (0..mean.len()).step_by(7) {
+            let dm = draws.iter().map(|d| d.response[j]).sum::<f64>() / draws.len() as f64;
+            let se = band.sd[j] / (draws.len() as f64).sqrt();
+            assert!(
+                (dm - band.mean[j]).abs() <= 5.0 * se + 1e-9,
+                "point {j}: {dm} vs {}",
+                band.mean[j]
+            );
+        }
+    }
+
+    // the beam's discrepancy in the data: the answer is the discrepancy model's, bit for bit
+    let weighed = calibrate(&with_delta, DiscrepancyPresence::Weighed);
+    let assumed = calibrate(&with_delta, DiscrepancyPresence::Assumed);
+    let p0 = weighed
+        .module3()
+        .averaged
+        .as_ref()
+        .unwrap()
+        .probability_without;
+    assert!(
+        p0 < bamudi::module4::NEGLIGIBLE_MODEL_WEIGHT,
+        "P(no discrepancy) = {p0}"
+    );
+    let (p_w, p_a) = (
+        weighed.predictor(&model).unwrap(),
+        assumed.predictor(&model).unwrap(),
+    );
+    for xi in loads {
+        assert_eq!(p_w.response(&xi).unwrap(), p_a.response(&xi).unwrap());
+        assert_eq!(p_w.outputs(&xi).unwrap(), p_a.outputs(&xi).unwrap());
+    }
+}

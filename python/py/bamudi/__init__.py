@@ -168,6 +168,7 @@ class Calibration:
     theta_mean = property(lambda self: self._native.theta_mean, doc="posterior mean of the gap (in)")
     theta_sd = property(lambda self: self._native.theta_sd, doc="posterior sd of the gap (in)")
     theta_ci95 = property(lambda self: self._native.theta_ci95, doc="central 95 % interval of the gap (in)")
+    probability_without = property(lambda self: self._native.probability_without, doc="P(no discrepancy): the weight of the fit without one in the predictions (None unless weighed)")
     rho_star = property(lambda self: self._native.rho_star, doc="Module-2 scale ρ* (Eq. 30)")
     sigma_eps = property(lambda self: self._native.sigma_eps, doc="noise sd σ_ε (microstrain)")
     gap_prior = property(lambda self: self._native.gap_prior, doc="uniform gap prior (lo, hi) in inches")

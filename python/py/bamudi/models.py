@@ -259,6 +259,7 @@ class ModelCalibration:
     theta_mean = property(lambda self: np.asarray(self._native.theta_mean), doc="posterior mean of θ (p,)")
     theta_sd = property(lambda self: np.asarray(self._native.theta_sd), doc="posterior sd of θ (p,)")
     theta_ci95 = property(lambda self: np.asarray(self._native.theta_ci95), doc="central 95 % intervals of θ (p, 2)")
+    probability_without = property(lambda self: self._native.probability_without, doc="P(no discrepancy): the weight of the fit without one in the predictions (None unless weighed)")
     rho_star = property(lambda self: self._native.rho_star, doc="ρ used by Modules 3-4 (marginal mode: its posterior mean)")
     rho_posterior = property(lambda self: self._native.rho_posterior, doc="(mean, sd) of ρ (marginal mode) or None")
     sigma_eps = property(lambda self: self._native.sigma_eps, doc="noise sd σ_ε (output units)")

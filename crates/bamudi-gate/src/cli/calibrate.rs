@@ -110,6 +110,13 @@ fn print_summary(cal: &Calibration, dir: &Path) {
         ci.0,
         ci.1
     );
+    if let Some(a) = &cal.module3().averaged {
+        println!(
+            "discrepancy: probability {:.3} that the gauges hold none the model lacks (evidence \
+             with {:.1}, without {:.1} nats, {:.1} charged for its fitted hyper-parameters)",
+            a.probability_without, a.log_evidence_with, a.log_evidence_without, a.penalty
+        );
+    }
     println!(
         "rho* = {:.4}, sigma_eps = {:.3} microstrain ({})",
         cal.rho_star(),

@@ -274,6 +274,10 @@ pub struct Replicate {
     /// `σ_ε` (µε).
     #[serde(default)]
     pub hyper: Option<[f64; 3]>,
+    /// `P(M_0 | y)`: the posterior probability of no discrepancy, when the models with and
+    /// without one were weighed ([`bamudi::module3::average`]).
+    #[serde(default)]
+    pub probability_without: Option<f64>,
     /// The truth's place in more posteriors than `θ`'s ([`Ranks`]; `None` in reports saved
     /// before they were measured).
     #[serde(default)]
@@ -776,6 +780,12 @@ impl Setup<'_> {
             marginal.level_variance = sbc.hyper.level_variance;
             sigma_eps = Some(sbc.hyper.noise_sd);
         }
+        if self.opts.sbc.is_some() {
+            // SBC's data come from the discrepancy's prior, present in every replicate: the
+            // posterior it checks is the one that assumes a discrepancy (the evidence weighing
+            // puts half its prior on none, another prior); the panel checks the weighing
+            marginal.presence = bamudi::DiscrepancyPresence::Assumed;
+        }
         CalibrationParams::default()
             .estimator(self.opts.estimator.clone())
             .training_size(self.opts.training_size)
@@ -892,6 +902,11 @@ impl Setup<'_> {
                 .marginal
                 .as_ref()
                 .map(|m| [m.amplitude, m.length_scale_factor, cal.sigma_eps()]),
+            probability_without: cal
+                .module3()
+                .averaged
+                .as_ref()
+                .map(|a| a.probability_without),
             ranks,
             seconds: 0.0,
         })
@@ -1203,6 +1218,7 @@ mod tests {
             rho_projection: None,
             rho_projection_true: None,
             hyper: None,
+            probability_without: None,
             ranks: None,
             seconds: 0.0,
         }

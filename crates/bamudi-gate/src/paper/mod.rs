@@ -267,10 +267,14 @@ pub struct ScenarioResult {
     pub rho_star_paper: f64,
     /// Our ρ*.
     pub rho_star: f64,
-    /// θ posterior with the discrepancy model.
+    /// θ posterior of the answer: with the discrepancy model, or the evidence-weighed mixture
+    /// of the models with and without it when they were weighed ([`bamudi::module3::average`]).
     pub theta_posterior: ThetaSummary,
     /// θ posterior without it.
     pub theta_posterior_no_discrepancy: ThetaSummary,
+    /// `P(M_0 | y)`: the posterior probability of no discrepancy, when the models were weighed.
+    #[serde(default)]
+    pub probability_without: Option<f64>,
     /// Force RMSE before/after.
     pub force_rmse: ForceRmse,
     /// Strain RMSE with/without discrepancy.
@@ -605,6 +609,7 @@ pub fn run_scenario(
         rho_star: cal.rho_star(),
         theta_posterior: m3.posterior.summary(0),
         theta_posterior_no_discrepancy: m3.posterior_no_discrepancy.summary(0),
+        probability_without: m3.averaged.as_ref().map(|a| a.probability_without),
         force_rmse: scores.force,
         strain_rmse: scores.strain,
         discrepancy_strain_rms,

@@ -145,6 +145,12 @@ impl Results {
             theta: serde_json::json!({
                 "prior_bounds": prior_bounds,
                 "with_discrepancy": PosteriorSummary::new(&m3.posterior),
+                "model_average": m3.averaged.as_ref().map(|a| serde_json::json!({
+                    "probability_without": a.probability_without,
+                    "log_evidence_with": a.log_evidence_with,
+                    "log_evidence_without": a.log_evidence_without,
+                    "penalty": a.penalty,
+                })),
                 "without_discrepancy": PosteriorSummary::new(&m3.posterior_no_discrepancy),
             }),
             alpha_hat: cal.alpha_hat().row_iter().map(|r| r.iter().copied().collect()).collect(),
@@ -510,6 +516,16 @@ fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
                 ci.1
             );
         }
+    }
+    if let Some(a) = &m3.averaged {
+        s += &format!(
+            "\nIs there a discrepancy at all? The models with and without one weighed by their \
+             evidence (ln Z {:.1} and {:.1} nats, {:.1} charged for the discrepancy's fitted \
+             hyper-parameters): **P(no discrepancy) = {:.3}**. The force and strain predictions \
+             mix the two models with these weights; the gap's interval above is the discrepancy \
+             model's (a discrepancy below the gauges' resolution still moves the gap).\n",
+            a.log_evidence_with, a.log_evidence_without, a.penalty, a.probability_without
+        );
     }
     if let Some(a) = cal.adequacy() {
         s += "\n";

@@ -7,6 +7,7 @@
 //! "without discrepancy" posterior (`δ = 0`, `ρ` integrated, `σ_ε` profiled: the strongest
 //! calibration without a discrepancy, [`no_discrepancy`]; Fig. 16) comes with it.
 
+pub mod average;
 pub mod coefficients;
 pub mod conditional;
 pub mod grid;
@@ -67,6 +68,12 @@ pub struct Module3 {
     /// points Module 4 uses).
     #[serde(default)]
     pub marginal: Option<marginal::MarginalFit>,
+    /// The models with and without a discrepancy weighed by their evidence, for Module 4's
+    /// predictions ([`average`]; `Some` with
+    /// [`DiscrepancyPresence::Weighed`](crate::params::DiscrepancyPresence::Weighed) on a grid
+    /// posterior in the marginal mode). The gap's posterior stays [`Self::posterior`].
+    #[serde(default)]
+    pub averaged: Option<average::ModelAverage>,
 }
 
 /// How Module 3 treats the discrepancy coefficients: through a [`CoefficientStrategy`] on
@@ -168,6 +175,7 @@ where
         posterior: post,
         posterior_no_discrepancy: post_without,
         marginal: None,
+        averaged: None,
     })
 }
 

@@ -13,6 +13,13 @@
 //! with `α`) and add `R η`, `R` the tolerances' response columns. Each draw goes through the prediction model with its own `θ_j`; the
 //! band is the draws' empirical 2.5 % and 97.5 % quantiles. Draws are seeded: the same seed
 //! gives the same band.
+//!
+//! When the models with and without a discrepancy were weighed ([`crate::module3::average`]),
+//! a draw first picks the model without one with its posterior probability
+//! ([`Predictor::probability_without`]), then a point of that calibration's `θ` posterior by
+//! its weight, and is `ρ g_u(x, θ_j) + L z` with `ρ` from its Gaussian given `θ_j` and `z`
+//! from the coefficients' covariance at `x` with mean zero: no correction, the spread of the
+//! one the discrepancy model cannot exclude.
 
 use super::{Band, Predictor};
 use crate::error::{BamudiError, Result};
@@ -45,7 +52,8 @@ pub struct ResponseDraw {
 /// not average out, so the sum's band is the widest the marginals allow.
 #[derive(Debug, Clone)]
 pub struct DrawPaths {
-    /// Support index per draw.
+    /// Support index per draw; from the support's length on, the points of the calibration
+    /// without a discrepancy (when the two models were weighed).
     picks: Vec<usize>,
     /// Standard normal of `ρ` per draw.
     rho_z: Vec<f64>,
@@ -88,6 +96,22 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             })
             .collect();
         let total = cumulative.last().copied().unwrap_or(0.0);
+        let p0 = self.probability_without();
+        let without: Vec<f64> = match p0 > 0.0 {
+            true => self.no_discrepancy_nodes().map_or_else(
+                |_| Vec::new(),
+                |nodes| {
+                    nodes
+                        .iter()
+                        .scan(0.0, |acc, n| {
+                            *acc += n.weight;
+                            Some(*acc)
+                        })
+                        .collect()
+                },
+            ),
+            false => Vec::new(),
+        };
         let n_coef = self.basis().0.ncols() + self.n_tolerances();
         let mut rng = StdRng::seed_from_u64(seed);
         let mut paths = DrawPaths {
@@ -97,11 +121,23 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             source: self.paths_fingerprint(n_coef),
         };
         for _ in 0..n {
-            let u = rng.random::<f64>() * total;
-            let j = cumulative.partition_point(|c| *c < u);
-            paths
-                .picks
-                .push(j.min(self.support.len().saturating_sub(1)));
+            // the model is drawn only when the two were weighed: otherwise the stream is the
+            // one of a calibration that assumes a discrepancy
+            let model0 = !without.is_empty() && rng.random::<f64>() < p0;
+            let j = match model0 {
+                false => {
+                    let u = rng.random::<f64>() * total;
+                    let j = cumulative.partition_point(|c| *c < u);
+                    j.min(self.support.len().saturating_sub(1))
+                }
+                true => {
+                    let last = without.last().copied().unwrap_or(0.0);
+                    let u = rng.random::<f64>() * last;
+                    let j = without.partition_point(|c| *c < u);
+                    self.support.len() + j.min(without.len() - 1)
+                }
+            };
+            paths.picks.push(j);
             paths.rho_z.push(standard_normal(&mut rng));
             paths
                 .alpha_z
@@ -139,19 +175,46 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             true => Some(covariance_factor(&cov, x)?),
             false => None,
         };
-        let mut responses: Vec<Option<DVector<f64>>> = vec![None; self.support.len()];
+        let n1 = self.support.len();
+        let without = match paths.picks.iter().any(|j| *j >= n1) {
+            true => self.no_discrepancy_nodes()?,
+            false => &[],
+        };
+        let theta_of = |j: usize| -> Result<&Vec<f64>> {
+            match j < n1 {
+                true => Ok(&self.support[j].0),
+                false => without.get(j - n1).map(|n| &n.theta).ok_or_else(|| {
+                    BamudiError::config("draws", "a draw's point is not in this calibration")
+                }),
+            }
+        };
+        let mut responses: Vec<Option<DVector<f64>>> = vec![None; n1 + without.len()];
         for &j in &paths.picks {
-            if responses[j].is_none() {
+            if responses.get(j).is_some_and(Option::is_none) {
                 let mut g = vec![0.0; basis.nrows()];
-                self.model
-                    .unobservable
-                    .evaluate(x, &self.support[j].0, &mut g)?;
+                self.model.unobservable.evaluate(x, theta_of(j)?, &mut g)?;
                 responses[j] = Some(DVector::from_vec(g));
             }
         }
         (0..paths.len())
             .map(|k| {
                 let j = paths.picks[k];
+                let g = responses.get(j).and_then(Option::as_ref).ok_or_else(|| {
+                    BamudiError::config("draws", "a draw's support point was not evaluated")
+                })?;
+                if j >= n1 {
+                    // no correction, the spread of the one the discrepancy model cannot exclude
+                    let node = &without[j - n1];
+                    let rho = node.rho_mean + node.rho_var.max(0.0).sqrt() * paths.rho_z[k];
+                    let mut r = g * rho;
+                    if let Some(f) = &factor {
+                        r += &basis * (f * paths.alpha_z[k].rows(0, basis.ncols()));
+                    }
+                    return Ok(ResponseDraw {
+                        theta: node.theta.clone(),
+                        response: r.iter().copied().collect(),
+                    });
+                }
                 let (rho_j, rho_var) = at.rho[j];
                 let rho = rho_j + rho_var.max(0.0).sqrt() * paths.rho_z[k];
                 let alpha = &at.mean[j] + &at.slope[j] * (rho - rho_j);
@@ -165,9 +228,6 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 if let Some(f) = &factor {
                     z += f * paths.alpha_z[k].rows(0, z.len());
                 }
-                let g = responses[j].as_ref().ok_or_else(|| {
-                    BamudiError::config("draws", "a draw's support point was not evaluated")
-                })?;
                 Ok(ResponseDraw {
                     theta: self.support[j].0.clone(),
                     response: (g * rho + &basis * z).iter().copied().collect(),

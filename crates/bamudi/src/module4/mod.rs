@@ -37,6 +37,14 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// Mixture components (mean and variance per point) and their weights.
+type Mixture = (Vec<(Vec<f64>, Vec<f64>)>, Vec<f64>);
+
+/// Below this posterior probability the calibration without a discrepancy is left out of the
+/// mixtures ([`Predictor::probability_without`]): it would move a mean by less than `1e-9` of
+/// the two models' difference, and evaluating its points costs one model run each.
+pub const NEGLIGIBLE_MODEL_WEIGHT: f64 = 1e-9;
+
 /// A distributed or output prediction with its 95 % credible band.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Band {
@@ -180,8 +188,13 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     }
 
     /// The corrected distributed response at `x` (Eq. 52; component blocked, length `C N_u`).
+    ///
+    /// When the models with and without a discrepancy were weighed
+    /// ([`crate::module3::average`]), the band is their mixture: this calibration's components
+    /// with weight `P(M_1 | y)`, the no-discrepancy fit's with `P(M_0 | y)`.
     pub fn response(&self, x: &[f64]) -> Result<Band> {
-        Ok(mixture_band(&self.response_components(x)?, &self.weights()))
+        let (comps, w) = self.response_mixture(x)?;
+        Ok(mixture_band(&comps, &w))
     }
 
     /// Mean and variance of the corrected distributed response at `x`: the moments of
@@ -206,21 +219,69 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// }
     /// ```
     pub fn response_moments(&self, x: &[f64]) -> Result<(Vec<f64>, Vec<f64>)> {
-        Ok(mixture_moments(
-            &self.response_components(x)?,
-            &self.weights(),
-        ))
+        let (comps, w) = self.response_mixture(x)?;
+        Ok(mixture_moments(&comps, &w))
+    }
+
+    /// The components and weights of [`Self::response`]'s mixture.
+    fn response_mixture(&self, x: &[f64]) -> Result<Mixture> {
+        let at = self.coef_at(x)?;
+        let comps = self.response_components_at(x, &at)?;
+        let mut g = vec![0.0; self.model.unobservable.response_len()];
+        let spread = || projected_variance(self.basis().0, &at.cov);
+        self.with_model_without(comps, spread, |theta| {
+            self.model.unobservable.evaluate(x, theta, &mut g)?;
+            Ok((DVector::from_column_slice(&g), DVector::zeros(g.len())))
+        })
+    }
+
+    /// `P(M_0 | y)`, the weight of the calibration without a discrepancy in this predictor's
+    /// mixtures ([`crate::module3::average`]): `0` unless the two models were weighed, and
+    /// below [`NEGLIGIBLE_MODEL_WEIGHT`].
+    pub fn probability_without(&self) -> f64 {
+        match &self.cal.module3().averaged {
+            Some(a) if a.probability_without >= NEGLIGIBLE_MODEL_WEIGHT => a.probability_without,
+            _ => 0.0,
+        }
+    }
+
+    /// Model 1's components `comps` (the support's weights) joined, when the two models were
+    /// weighed, by model 0's (the no-discrepancy fit's points; `parts` gives the model's parts
+    /// at a `θ`), each model's weights scaled by its posterior probability. Model 0's
+    /// components keep the spread of the discrepancy model 1 cannot exclude (`spread`: the
+    /// variance of its correction at `x`, mostly the directions the gauges do not see): the
+    /// evidence says the data need no correction, not that the model is exact.
+    fn with_model_without(
+        &self,
+        comps: Vec<(Vec<f64>, Vec<f64>)>,
+        spread: impl FnOnce() -> Vec<f64>,
+        parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+    ) -> Result<Mixture> {
+        let mut w = self.weights();
+        let p0 = self.probability_without();
+        if p0 == 0.0 {
+            return Ok((comps, w));
+        }
+        let (mut c0, w0) = self.no_discrepancy_components(parts)?;
+        let spread = spread();
+        for c in &mut c0 {
+            c.1.iter_mut().zip(&spread).for_each(|(v, s)| *v += s);
+        }
+        w.iter_mut().for_each(|v| *v *= 1.0 - p0);
+        w.extend(w0.iter().map(|v| v * p0));
+        let mut comps = comps;
+        comps.extend(c0);
+        Ok((comps, w))
     }
 
     /// The response mixture's components at `x` (mean and variance per point, per support
     /// point).
-    fn response_components(&self, x: &[f64]) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
-        let at = self.coef_at(x)?;
-        let cols = self.tolerance_columns(x, &at)?;
+    fn response_components_at(&self, x: &[f64], at: &CoefAt) -> Result<Vec<(Vec<f64>, Vec<f64>)>> {
+        let cols = self.tolerance_columns(x, at)?;
         let l = self.basis().0;
         let mut g = vec![0.0; l.nrows()];
         let tol = cols.as_ref().map(|c| &c.response);
-        self.components(&at, l, tol, |theta| {
+        self.components(at, l, tol, |theta| {
             self.model.unobservable.evaluate(x, theta, &mut g)?;
             Ok((DVector::from_column_slice(&g), DVector::zeros(g.len())))
         })
@@ -231,11 +292,19 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         let at = self.coef_at(x)?;
         let cols = self.tolerance_columns(x, &at)?;
         let tol = cols.as_ref().map(|c| &c.observed);
-        self.mixture(&at, self.basis().1, tol, |theta| self.model_parts(x, theta))
+        let comps =
+            self.components(&at, self.basis().1, tol, |theta| self.model_parts(x, theta))?;
+        let spread = || projected_variance(self.basis().1, &at.cov);
+        let (comps, w) =
+            self.with_model_without(comps, spread, |theta| self.model_parts(x, theta))?;
+        Ok(mixture_band(&comps, &w))
     }
 
     /// The reconstructed discrepancy `L μ_α(x)` (posterior-averaged in the marginal mode) with
-    /// a 95 % band `± 1.96 sd` from the coefficients' covariance (Eq. 37; Fig. 15).
+    /// a 95 % band `± 1.96 sd` from the coefficients' covariance (Eq. 37; Fig. 15). When the
+    /// two models were weighed ([`Self::probability_without`] `= p0`), the correction is zero
+    /// with probability `p0`, keeping its spread `v` (as in [`Self::response`]): mean
+    /// `(1 − p0) m`, variance `v + p0 (1 − p0) m²`.
     pub fn discrepancy(&self, x: &[f64]) -> Result<Band> {
         let at = self.coef_at(x)?;
         let l = self.basis().0;
@@ -245,10 +314,13 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             .iter()
             .zip(&w)
             .fold(DVector::zeros(at.cov.nrows()), |acc, (m, w)| acc + m * *w);
-        let mean: Vec<f64> = (l * mu).iter().copied().collect();
+        let m1: Vec<f64> = (l * mu).iter().copied().collect();
+        let q = 1.0 - self.probability_without();
+        let mean: Vec<f64> = m1.iter().map(|m| q * m).collect();
         let sd: Vec<f64> = projected_variance(l, &at.cov)
             .into_iter()
-            .map(f64::sqrt)
+            .zip(&m1)
+            .map(|(v, m)| (v + q * (1.0 - q) * m * m).max(0.0).sqrt())
             .collect();
         let lower = mean
             .iter()
@@ -292,17 +364,35 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// points, `(u_j, v_j) = parts(θ_j)`.
     fn no_discrepancy_mixture(
         &self,
-        mut parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+        parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
     ) -> Result<Band> {
-        let fit = self.cal.module3().no_discrepancy.as_ref().ok_or_else(|| {
-            BamudiError::Calibration(
-                "this calibration has no no-discrepancy fit (`no_discrepancy_fit = false`, or \
-                 saved by an older version): calibrate again with it to compare against it"
-                    .into(),
-            )
-        })?;
-        let comps = fit
-            .nodes
+        let (comps, w) = self.no_discrepancy_components(parts)?;
+        Ok(mixture_band(&comps, &w))
+    }
+
+    /// The no-discrepancy fit's points (an error for a calibration saved without it).
+    fn no_discrepancy_nodes(&self) -> Result<&[crate::module3::no_discrepancy::NoDiscrepancyNode]> {
+        self.cal
+            .module3()
+            .no_discrepancy
+            .as_ref()
+            .map(|f| f.nodes.as_slice())
+            .ok_or_else(|| {
+                BamudiError::Calibration(
+                    "this calibration has no no-discrepancy fit (`no_discrepancy_fit = false`, or \
+                     saved by an older version): calibrate again with it to compare against it"
+                        .into(),
+                )
+            })
+    }
+
+    /// The components and weights of [`Self::no_discrepancy_mixture`].
+    fn no_discrepancy_components(
+        &self,
+        mut parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
+    ) -> Result<Mixture> {
+        let nodes = self.no_discrepancy_nodes()?;
+        let comps = nodes
             .iter()
             .map(|n| {
                 let (u, v) = parts(&n.theta)?;
@@ -311,8 +401,8 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 Ok((mean, var))
             })
             .collect::<Result<Vec<_>>>()?;
-        let w: Vec<f64> = fit.nodes.iter().map(|n| n.weight).collect();
-        Ok(mixture_band(&comps, &w))
+        let w: Vec<f64> = nodes.iter().map(|n| n.weight).collect();
+        Ok((comps, w))
     }
 
     /// Mean and variance of the noise-free outputs at every row of `x` (`N x N_o` each): the
@@ -328,7 +418,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 let cols = self.tolerance_columns(&xi, &at)?;
                 let tol = cols.as_ref().map(|c| &c.observed);
                 let comps = self.components(&at, bm, tol, |theta| self.model_parts(&xi, theta))?;
-                Ok(mixture_moments(&comps, &self.weights()))
+                let spread = || projected_variance(bm, &at.cov);
+                let (comps, w) =
+                    self.with_model_without(comps, spread, |theta| self.model_parts(&xi, theta))?;
+                Ok(mixture_moments(&comps, &w))
             })
             .collect::<Result<Vec<_>>>()?;
         let n_o = bm.nrows();
@@ -589,18 +682,6 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                 Ok((mean, var))
             })
             .collect()
-    }
-
-    /// The band of the mixture of [`components`](Self::components).
-    fn mixture(
-        &self,
-        at: &CoefAt,
-        m: &DMatrix<f64>,
-        tol: Option<&DMatrix<f64>>,
-        parts: impl FnMut(&[f64]) -> Result<(DVector<f64>, DVector<f64>)>,
-    ) -> Result<Band> {
-        let comps = self.components(at, m, tol, parts)?;
-        Ok(mixture_band(&comps, &self.weights()))
     }
 
     fn weights(&self) -> Vec<f64> {

@@ -78,6 +78,7 @@ mod state;
 pub use lowrank::{LowRank, Spectrum};
 pub use state::{CrossCov, MarginalState, NodeTerms};
 
+use super::average::ModelAverage;
 use super::grid::{self, LogPosteriors, coarse_nodes};
 use super::likelihood::FactorReport;
 use super::no_discrepancy::{self, NoDiscrepancyFit};
@@ -88,7 +89,7 @@ use crate::error::{BamudiError, Result};
 use crate::module2::training::{LinearParts, XContext};
 use crate::module2::{Module2, Problem};
 use crate::optim::Brent;
-use crate::params::{CoefficientKernel, CoefficientScales, MarginalPrior};
+use crate::params::{CoefficientKernel, CoefficientScales, DiscrepancyPresence, MarginalPrior};
 use mlmodel::{DiscrepancyBasis, LinearObservableModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use nuisance::Nuisance;
@@ -559,6 +560,14 @@ where
     let (rho_mean, rho_sd) = rho_mixture(&nodes);
     let rho_projection = projection_rho(&nodes, lik.cov.sigma2);
     let tolerances = tolerance_estimates(&lik, &theta_hat, rho_mean)?;
+    let averaged = match (p.cfg.marginal.presence, p.cfg.no_discrepancy_fit) {
+        (DiscrepancyPresence::Weighed, true) => {
+            // the amplitude and the length-scale factor, unless held
+            let hyper = if p.cfg.marginal.fixed.is_some() { 0 } else { 2 };
+            ModelAverage::weigh(&post, &post_without, lik.y.len(), hyper)?
+        }
+        _ => None,
+    };
     Ok(Module3 {
         rho_star: rho_mean,
         rho_profile: None,
@@ -595,6 +604,7 @@ where
             tolerances,
             tolerance_columns: lik.cov.tolerance_columns().cloned(),
         }),
+        averaged,
     })
 }
 
