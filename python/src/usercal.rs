@@ -396,7 +396,8 @@ impl ModelCalibration {
 
     /// The posterior probability that the data hold no discrepancy the model lacks, when the
     /// calibrations with and without one were weighed by their evidence (the default; the
-    /// predictions mix the two with this weight); `None` otherwise.
+    /// predictions mix the two with this weight, leaving the fit without one out below 1e-9);
+    /// `None` otherwise.
     #[getter]
     fn probability_without(&self) -> Option<f64> {
         self.cal

@@ -418,8 +418,10 @@ pub enum DiscrepancyPresence {
     Assumed,
     /// The models with and without a discrepancy weighed by their evidence, the answer their
     /// mixture ([`crate::module3::average`]). Needs the no-discrepancy fit
-    /// ([`CalibrationParams::no_discrepancy_fit`]) and a one-dimensional `θ` (a grid
-    /// posterior carries its evidence); otherwise the model with the discrepancy is the answer.
+    /// ([`CalibrationParams::no_discrepancy_fit`]), a one-dimensional `θ` (a grid posterior
+    /// carries its evidence) and no declared build tolerances (the fit without a discrepancy
+    /// does not integrate them, so the evidences would not compare the discrepancy alone);
+    /// otherwise the model with the discrepancy is the answer.
     /// The default: on truths without a discrepancy, or with one below the gauges' resolution,
     /// the discrepancy model's `θ` posterior is several times wider than the data need and,
     /// near the gap's edge, its corrected force 2.6-9.6x worse than the fit without one

@@ -61,7 +61,8 @@ pub struct ModelAverage {
 impl ModelAverage {
     /// The weighing of the grid posteriors `with` and `without` (the same nodes) for `n_s`
     /// observations and `hyper` hyper-parameters model 1 fits beyond model 0. `None` when a
-    /// posterior is not a grid one (MCMC draws carry no evidence).
+    /// posterior is not a grid one (MCMC draws carry no evidence), or the two grids differ (a
+    /// node where one density is not finite).
     ///
     /// ```
     /// use bamudi::module3::average::ModelAverage;
@@ -89,6 +90,12 @@ impl ModelAverage {
         let (ThetaPosterior::Grid(w1), ThetaPosterior::Grid(w0)) = (with, without) else {
             return Ok(None);
         };
+        if w1.theta != w0.theta {
+            // the interpolation subdivides only between finite nodes, so a node outside one
+            // model's support gives the two different grids: no common mixture
+            log::warn!("model weighing skipped: the two θ posteriors are not on one grid");
+            return Ok(None);
+        }
         let (z1, z0) = (w1.log_evidence(), w0.log_evidence());
         let penalty = 0.5 * hyper as f64 * (n_s.max(1) as f64).ln();
         let probability_without = 1.0 / (1.0 + (z1 - penalty - z0).exp());
@@ -146,7 +153,10 @@ mod tests {
     fn a_mixture_with_underflowing_nodes_round_trips_through_json() {
         let theta: Vec<f64> = (0..201).map(|i| i as f64 / 10.0).collect();
         let narrow = |m: f64, c: f64| {
-            let l = theta.iter().map(|t| c - 0.5 * ((t - m) / 0.05).powi(2)).collect();
+            let l = theta
+                .iter()
+                .map(|t| c - 0.5 * ((t - m) / 0.05).powi(2))
+                .collect();
             ThetaPosterior::Grid(GridPosterior::new(theta.clone(), l).unwrap())
         };
         let avg = ModelAverage::weigh(&narrow(2.0, 0.0), &narrow(18.0, 1.0), 50, 2)
@@ -161,6 +171,10 @@ mod tests {
         assert_eq!(back, avg);
         // 1 nat more evidence without, ½ ln 50 x 2 = 3.9 charged with: P(M0) = 1/(1 + e^-4.9)
         let want = 1.0 / (1.0 + (-1.0 - 50f64.ln()).exp());
-        assert!((avg.probability_without - want).abs() < 1e-6, "{}", avg.probability_without);
+        assert!(
+            (avg.probability_without - want).abs() < 1e-6,
+            "{}",
+            avg.probability_without
+        );
     }
 }

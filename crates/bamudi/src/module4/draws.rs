@@ -156,6 +156,14 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             theta.iter().for_each(|t| t.to_bits().hash(&mut h));
             w.to_bits().hash(&mut h);
         }
+        // the weighing: paths of a weighed predictor index the other model's points too
+        let p0 = self.probability_without();
+        if p0 > 0.0 {
+            p0.to_bits().hash(&mut h);
+            self.no_discrepancy_nodes()
+                .map_or(0, <[_]>::len)
+                .hash(&mut h);
+        }
         h.finish()
     }
 
@@ -208,7 +216,11 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
                     let rho = node.rho_mean + node.rho_var.max(0.0).sqrt() * paths.rho_z[k];
                     let mut r = g * rho;
                     if let Some(f) = &factor {
-                        r += &basis * (f * paths.alpha_z[k].rows(0, basis.ncols()));
+                        // the coefficients' part of the joint draw (not the tolerances'): the
+                        // spread the bands add ([`Predictor::response`])
+                        let z = f * paths.alpha_z[k].rows(0, basis.ncols());
+                        let n_alpha = self.basis().0.ncols();
+                        r += self.basis().0 * z.rows(0, n_alpha);
                     }
                     return Ok(ResponseDraw {
                         theta: node.theta.clone(),

@@ -170,7 +170,8 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
     /// `N x K` matrices; the marginal mode's means are averaged over the `θ` posterior), zero
-    /// at rows where the response vanishes.
+    /// at rows where the response vanishes. The discrepancy model's, also when the two models
+    /// were weighed ([`Self::discrepancy`] is the weighed correction).
     pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
         self.check_x(x.ncols())?;
         let (mut mean, mut var) = match &self.marginal {
@@ -320,7 +321,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         let sd: Vec<f64> = projected_variance(l, &at.cov)
             .into_iter()
             .zip(&m1)
-            .map(|(v, m)| (v + q * (1.0 - q) * m * m).max(0.0).sqrt())
+            .map(|(v, m)| match q == 1.0 {
+                true => v.sqrt(),
+                false => (v + q * (1.0 - q) * m * m).max(0.0).sqrt(),
+            })
             .collect();
         let lower = mean
             .iter()
@@ -432,7 +436,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     /// Eq. 50 at a given `θ` per row: `ρ A g_u(x_i, θ_i) + b(x_i, θ_i) + B μ_α(x_i)`
     /// (`N x N_o`; the coefficients' posterior-averaged mean and `ρ`'s posterior mean are
-    /// used at every `θ`).
+    /// used at every `θ`). The discrepancy model's, also when the two models were weighed
+    /// ([`Self::probability_without`]): a caller that sets it against the mixed
+    /// [`Self::output_moments`] should calibrate with `presence = "assumed"` (the close loop's
+    /// gate calibrator fits no model without a discrepancy, so nothing is weighed there).
     pub fn outputs_at_theta(&self, x: &DMatrix<f64>, theta: &[Vec<f64>]) -> Result<DMatrix<f64>> {
         if theta.len() != x.nrows() {
             return Err(BamudiError::dim(

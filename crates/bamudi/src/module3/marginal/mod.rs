@@ -560,8 +560,15 @@ where
     let (rho_mean, rho_sd) = rho_mixture(&nodes);
     let rho_projection = projection_rho(&nodes, lik.cov.sigma2);
     let tolerances = tolerance_estimates(&lik, &theta_hat, rho_mean)?;
-    let averaged = match (p.cfg.marginal.presence, p.cfg.no_discrepancy_fit) {
-        (DiscrepancyPresence::Weighed, true) => {
+    // with declared tolerances the discrepancy model's evidence integrates them and the fit
+    // without one does not: the comparison would not be of the discrepancy alone
+    let no_tolerances = p.model.tolerances.is_empty();
+    let averaged = match (
+        p.cfg.marginal.presence,
+        p.cfg.no_discrepancy_fit,
+        no_tolerances,
+    ) {
+        (DiscrepancyPresence::Weighed, true, true) => {
             // the amplitude and the length-scale factor, unless held
             let hyper = if p.cfg.marginal.fixed.is_some() { 0 } else { 2 };
             ModelAverage::weigh(&post, &post_without, lik.y.len(), hyper)?
