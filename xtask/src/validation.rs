@@ -345,12 +345,12 @@ fn probability_without(s: &ScenarioCoverage) -> String {
         return "–".into();
     }
     p.sort_by(f64::total_cmp);
-    format!(
-        "{:.2} [{:.0e}, {:.2}]",
-        p[p.len() / 2],
-        p[0],
-        p[p.len() - 1]
-    )
+    // two decimals where they say something, else the order of magnitude
+    let f = |v: f64| match v >= 0.01 {
+        true => format!("{v:.2}"),
+        false => format!("{v:.0e}"),
+    };
+    format!("{} [{}, {}]", f(p[p.len() / 2]), f(p[0]), f(p[p.len() - 1]))
 }
 
 fn nt(v: bamudi_gate::baselines::NormalTangential, p: usize) -> String {
