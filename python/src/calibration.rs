@@ -130,11 +130,7 @@ impl Calibration {
     /// `None` otherwise.
     #[getter]
     fn probability_without(&self) -> Option<f64> {
-        self.cal
-            .module3()
-            .averaged
-            .as_ref()
-            .map(|a| a.probability_without)
+        self.cal.module3().probability_without()
     }
 
     /// The Module-2 scale ρ* (Eq. 30).

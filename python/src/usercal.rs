@@ -400,11 +400,7 @@ impl ModelCalibration {
     /// `None` otherwise.
     #[getter]
     fn probability_without(&self) -> Option<f64> {
-        self.cal
-            .module3()
-            .averaged
-            .as_ref()
-            .map(|a| a.probability_without)
+        self.cal.module3().probability_without()
     }
     /// `P(θ_j <= t | data)` (the grid CDF, linear between nodes, or the share of MCMC draws).
     fn theta_cdf(&self, j: usize, t: f64) -> PyResult<f64> {

@@ -902,11 +902,7 @@ impl Setup<'_> {
                 .marginal
                 .as_ref()
                 .map(|m| [m.amplitude, m.length_scale_factor, cal.sigma_eps()]),
-            probability_without: cal
-                .module3()
-                .averaged
-                .as_ref()
-                .map(|a| a.probability_without),
+            probability_without: cal.module3().probability_without(),
             ranks,
             seconds: 0.0,
         })

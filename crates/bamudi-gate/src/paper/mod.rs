@@ -609,7 +609,7 @@ pub fn run_scenario(
         rho_star: cal.rho_star(),
         theta_posterior: m3.posterior.summary(0),
         theta_posterior_no_discrepancy: m3.posterior_no_discrepancy.summary(0),
-        probability_without: m3.averaged.as_ref().map(|a| a.probability_without),
+        probability_without: m3.probability_without(),
         force_rmse: scores.force,
         strain_rmse: scores.strain,
         discrepancy_strain_rms,

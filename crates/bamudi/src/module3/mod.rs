@@ -76,6 +76,14 @@ pub struct Module3 {
     pub averaged: Option<average::ModelAverage>,
 }
 
+impl Module3 {
+    /// `P(M_0 | y)`, the posterior probability of no discrepancy, when the two models were
+    /// weighed ([`Self::averaged`]); `None` otherwise.
+    pub fn probability_without(&self) -> Option<f64> {
+        self.averaged.as_ref().map(|a| a.probability_without)
+    }
+}
+
 /// How Module 3 treats the discrepancy coefficients: through a [`CoefficientStrategy`] on
 /// Module 2's estimates (the paper's mode and the conditional one), or integrated out
 /// ([`marginal`]).
