@@ -91,6 +91,9 @@ pub struct CoverageOptions {
     pub theta_grid_points: usize,
     /// New water-level pairs per replicate for the force bands.
     pub new_conditions: usize,
+    /// What each replicate is scored on at the new conditions ([`Scoring`]).
+    #[serde(default)]
+    pub scoring: Scoring,
     /// Target element size of the gate mesh (in); `None` keeps the default gate's 12 in.
     pub mesh_element_size: Option<f64>,
     /// Gauge noise sd (microstrain) of the truth and of the Module-2 training outputs.
@@ -138,6 +141,7 @@ impl CoverageOptions {
             estimator: EstimatorParams::ExactLinear,
             theta_grid_points: 121,
             new_conditions: 10,
+            scoring: Scoring::Full,
             mesh_element_size: None,
             gauge_noise_sd: 1.0,
             discrepancy: DiscrepancyShape::Paper,
@@ -202,6 +206,22 @@ impl CoverageOptions {
 
 fn one() -> f64 {
     1.0
+}
+
+/// What a replicate is scored on besides `θ` ([`CoverageOptions::scoring`]). `θ`'s posterior,
+/// the data and the new conditions are the same either way, so a lighter study's `θ` and force
+/// bands are the full one's, bit for bit.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scoring {
+    /// Everything: the force bands and RMSE, the baselines, oracles and discrepancy error
+    /// ([`Replicate::baselines`], [`Replicate::delta`]), the fatigue bands
+    /// ([`Replicate::band_fatigue`]) and the ranks of the force and damage ([`Replicate::ranks`]).
+    #[default]
+    Full,
+    /// The force bands and RMSE only (the rest `None`): about three quarters of a replicate's
+    /// cost on the quick size, for studies that judge `θ` and the bands alone (the test suite).
+    ForceBands,
 }
 
 /// Simulation-based calibration's settings ([`CoverageOptions::sbc`]).
@@ -848,8 +868,13 @@ impl Setup<'_> {
             self.contact.gate().nu_points.clone(),
         )?;
         let mut tally = BandTally::default();
+        let full = self.opts.scoring == Scoring::Full;
         let mut errors = ErrorTally::default();
-        let seen = SeenSubspace::new(&self.model, self.contact, truth.theta)?;
+        let seen = if full {
+            Some(SeenSubspace::new(&self.model, self.contact, truth.theta)?)
+        } else {
+            None
+        };
         let mut fatigue = (0usize, 0usize);
         for (k, x) in new_x.iter().enumerate() {
             let truth_f = truth.forces(self.contact, *x)?;
@@ -858,6 +883,9 @@ impl Setup<'_> {
             for p in 0..2 * nu {
                 tally.add(p < nu, truth_f[p], before[p], &band, p);
             }
+            let Some(seen) = &seen else {
+                continue;
+            };
             let forces = ConditionForces {
                 truth: &truth_f,
                 model_part: &truth.model_part(self.contact, *x)?,
@@ -869,13 +897,13 @@ impl Setup<'_> {
                 calibrated: &band.mean,
                 delta_hat: &predictor.discrepancy(x)?.mean,
             };
-            errors.add_condition(&forces, &seen, nu);
+            errors.add_condition(&forces, seen, nu);
             let hits = fatigue_hits(&predictor, &block, x, &truth_f, derive_seed(seed, k as u64))?;
             fatigue = (fatigue.0 + hits.0, fatigue.1 + hits.1);
         }
         let ranks = match new_x.first() {
-            Some(x0) => Some(self.ranks(cal, &predictor, &block, truth, *x0, seed)?),
-            None => None,
+            Some(x0) if full => Some(self.ranks(cal, &predictor, &block, truth, *x0, seed)?),
+            _ => None,
         };
         let s = post.summary(0);
         Ok(Replicate {
@@ -889,12 +917,12 @@ impl Setup<'_> {
             rho_true: Some(truth.rho),
             band_normal: tally.inside[0] as f64 / tally.n[0].max(1) as f64,
             band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
-            band_fatigue: Some(fatigue.0 as f64 / fatigue.1.max(1) as f64),
+            band_fatigue: full.then(|| fatigue.0 as f64 / fatigue.1.max(1) as f64),
             force_rmse: tally.rmse(),
             band_halfwidth: Some(tally.halfwidth()),
             band_halfwidth_median: Some(tally.median_halfwidth()),
-            baselines: Some(errors.baselines()),
-            delta: Some(errors.delta()),
+            baselines: full.then(|| errors.baselines()),
+            delta: full.then(|| errors.delta()),
             rho_projection: cal.module3().marginal.as_ref().map(|m| m.rho_projection),
             rho_projection_true: None,
             hyper: cal
@@ -1222,6 +1250,52 @@ mod tests {
 
     /// A study may start at any replicate with the exact estimator, whose fit does not depend
     /// on the replicate, but not with a learnt one, which replicate 0 trains for the others.
+    /// The force-band scoring leaves out the baselines, the fatigue bands and the ranks and
+    /// changes nothing else: `θ` and the force bands are the full scoring's bit for bit, and
+    /// the full scoring fills every score with values in range (the suite's coverage tests use
+    /// the lighter one, so this is where the full one runs in CI).
+    #[test]
+    fn force_band_scoring_is_the_full_scoring_without_the_extras() {
+        let small = |scoring| CoverageOptions {
+            scenarios: vec![1],
+            n_replicates: 2,
+            n_experiments: 20,
+            theta_grid_points: 25,
+            new_conditions: 2,
+            scoring,
+            threads: 1,
+            seed: 99,
+            ..CoverageOptions::quick()
+        };
+        let full = run(&small(Scoring::Full), &|_, _| {}).unwrap();
+        let light = run(&small(Scoring::ForceBands), &|_, _| {}).unwrap();
+        let (f, l) = (&full.scenarios[0], &light.scenarios[0]);
+        for (a, b) in f.replicates.iter().zip(&l.replicates) {
+            let bits = |r: &Replicate| {
+                [
+                    r.pit,
+                    r.theta_mean,
+                    r.theta_sd,
+                    r.band_normal,
+                    r.band_tangential,
+                    r.force_rmse.normal_after,
+                    r.force_rmse.tangential_after,
+                ]
+                .map(f64::to_bits)
+            };
+            assert_eq!(bits(a), bits(b));
+            assert!(b.baselines.is_none() && b.delta.is_none());
+            assert!(b.ranks.is_none() && b.band_fatigue.is_none());
+            assert!((0.0..=1.0).contains(&a.band_fatigue.unwrap()));
+            let ranks = a.ranks.unwrap();
+            assert!((0.0..=1.0).contains(&ranks.force) && ranks.force_z.is_finite());
+            let baselines = a.baselines.unwrap();
+            assert!(serde_json::to_string(&baselines).is_ok() && a.delta.is_some());
+        }
+        assert!(f.correction.is_some() && f.ranked.is_some());
+        assert!(l.correction.is_none() && l.ranked.is_none());
+    }
+
     #[test]
     fn a_later_first_replicate_needs_the_exact_estimator() {
         let later = CoverageOptions {

@@ -1,7 +1,11 @@
 //! Quick coverage studies as tests, on the 24-in mesh with the exact estimator, calibrated in
 //! the default (marginal) mode with 60 experiments per data set (half of `cargo xtask coverage
 //! --quick`), on seed 8080, which played no part in choosing the default prior (that was seed
-//! 2021 with the paper's discrepancy, `docs/results/validation.md`).
+//! 2021 with the paper's discrepancy, `docs/results/validation.md`). Both are scored on `θ` and
+//! the force bands only (`coverage::Scoring::ForceBands`, what they assert; the baselines,
+//! fatigue bands and ranks they would otherwise compute took a quarter of their time, and the
+//! unit test `force_band_scoring_is_the_full_scoring_without_the_extras` runs the full scoring
+//! and shows that the lighter one changes no bit of the rest).
 //!
 //! 1. **A fixed, wrong discrepancy** (the paper's Eq. 53-54, a shape the calibration's basis
 //!    does not contain), `θ*` drawn from the prior: the number of replicates whose 95 % `θ`
@@ -57,6 +61,7 @@ fn quick_coverage_of_the_default_mode_holds_its_nominal_level() {
     let opts = CoverageOptions {
         n_experiments: 60,
         seed: SEED,
+        scoring: coverage::Scoring::ForceBands,
         ..CoverageOptions::quick()
     };
     let report = coverage::run(&opts, &|_, _| {}).unwrap();
@@ -119,6 +124,7 @@ fn sbc_with_the_discrepancy_drawn_from_the_prior_has_uniform_ranks() {
     let opts = CoverageOptions {
         n_experiments: 60,
         seed: SEED,
+        scoring: coverage::Scoring::ForceBands,
         sbc: Some(coverage::SbcOptions {
             hyper: coverage::GeneratingHyper {
                 amplitude: 6e-6,

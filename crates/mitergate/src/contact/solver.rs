@@ -236,20 +236,31 @@ impl ContactModel {
             && state.residual > SLOW_CONTRACTION * previous.1
             && state.newton_rejections < MAX_NEWTON_REJECTIONS;
         let u = std::mem::replace(&mut state.u, DVector::zeros(0));
-        state.u = if slow_tail {
+        // `Ok(u_new)`: the next iterate is the spring solve's own, whose active set and forces
+        // (with the springs of this step) are those just computed
+        let next = if slow_tail {
             match self.coupled_newton_step(problem, &u_new, &new_active) {
-                Some(next) if self.merit(&next, problem) < self.merit(&u_new, problem) => next,
+                Some(next) if self.merit(&next, problem) < self.merit(&u_new, problem) => Err(next),
                 _ => {
                     state.newton_rejections += 1;
-                    u_new
+                    Ok(u_new)
                 }
             }
         } else if state.mismatches == 0 {
-            u_new
+            Ok(u_new)
         } else {
-            self.damped_step(u, u_new, &problem.load, &springs)
+            Err(self.damped_step(u, u_new, &problem.load, &springs))
         };
-        self.update_springs(problem, state);
+        match next {
+            Ok(u_new) => {
+                state.u = u_new;
+                self.set_springs(state, new_active, &forces);
+            }
+            Err(next) => {
+                state.u = next;
+                self.update_springs(problem, state);
+            }
+        }
         Ok(None)
     }
 
@@ -263,6 +274,11 @@ impl ContactModel {
         };
         let active = self.active_set(&ubar, &springs);
         let forces = self.forces_from(&ubar, &springs);
+        self.set_springs(state, active, &forces);
+    }
+
+    /// Takes `active` and `κ_b = k_T F_N,b` from `forces` (those of `state.u`).
+    fn set_springs(&self, state: &mut Iteration, active: Vec<bool>, forces: &[f64]) {
         state.active = active;
         let k_t = self.params.k_tangential;
         for b in 0..self.gate.n_points() {
@@ -354,11 +370,7 @@ impl ContactModel {
         let dim = problem.load.len();
         let solution = with_workspace(dim, |mut mat, mut rhs, ws| {
             copy_lower(&self.stiffness, mat.rb_mut());
-            self.for_each_spring_entry(&coeffs, |i, j, v| {
-                if i >= j {
-                    mat[(i, j)] += v;
-                }
-            });
+            self.for_each_spring_entry(&coeffs, Entries::Lower, |i, j, v| mat[(i, j)] += v);
             column_slice(rhs.rb_mut(), 0).copy_from_slice(problem.load.as_slice());
             ws.cholesky_solve(mat, rhs.rb_mut())
                 .map(|()| column_slice(rhs, 0).to_vec())
@@ -413,8 +425,8 @@ impl ContactModel {
                 tangential: vec![0.0; n],
                 coupling: coeffs.coupling.clone(),
             };
-            self.for_each_spring_entry(&coupling_only, |i, j, v| b[i] += v * u[j]);
-            self.for_each_spring_entry(&coeffs, |i, j, v| mat[(i, j)] += v);
+            self.for_each_spring_entry(&coupling_only, Entries::All, |i, j, v| b[i] += v * u[j]);
+            self.for_each_spring_entry(&coeffs, Entries::All, |i, j, v| mat[(i, j)] += v);
             ws.lu_solve(mat, rhs.rb_mut());
             column_slice(rhs, 0).to_vec()
         });
@@ -457,17 +469,23 @@ impl ContactModel {
 
     /// Calls `add(row, col, value)` for every entry of `G + E` (displacement-component
     /// indices, blocked `[normal; tangential]`; `E` sits in the tangential rows and normal
-    /// columns).
+    /// columns), or with [`Entries::Lower`] for those of `G` on and below the diagonal.
+    /// Each matrix entry receives its values in the same order either way.
     fn for_each_spring_entry(
         &self,
         coeffs: &SpringCoefficients,
+        entries: Entries,
         mut add: impl FnMut(usize, usize, f64),
     ) {
         let m = self.gate.n_quoin_nodes();
+        debug_assert!(entries == Entries::All || coeffs.coupling.iter().all(|&e| e == 0.0));
         for (b, col) in self.columns.iter().enumerate() {
             let (gn, gt, e) = (coeffs.normal[b], coeffs.tangential[b], coeffs.coupling[b]);
             for &(i, ti) in col {
                 for &(j, tj) in col {
+                    if entries == Entries::Lower && j > i {
+                        continue;
+                    }
                     if gn != 0.0 {
                         add(i, j, gn * ti * tj);
                     }
@@ -632,6 +650,16 @@ fn copy_lower(k: &DMatrix<f64>, mut out: MatMut<'_, f64>) {
         let column = k.column(j);
         column_slice(out.rb_mut(), j)[j..].copy_from_slice(&column.as_slice()[j..]);
     }
+}
+
+/// Which entries `ContactModel::for_each_spring_entry` visits.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Entries {
+    /// Every entry of `G + E`.
+    All,
+    /// The entries of `G` with row ≥ column (what the Cholesky factorisation reads); `E` must
+    /// be zero.
+    Lower,
 }
 
 /// Per-point spring coefficients (see `ContactModel::spring_coefficients`), psi/in.
