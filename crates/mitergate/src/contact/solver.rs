@@ -236,27 +236,27 @@ impl ContactModel {
             && state.residual > SLOW_CONTRACTION * previous.1
             && state.newton_rejections < MAX_NEWTON_REJECTIONS;
         let u = std::mem::replace(&mut state.u, DVector::zeros(0));
-        // `Ok(u_new)`: the next iterate is the spring solve's own, whose active set and forces
-        // (with the springs of this step) are those just computed
         let next = if slow_tail {
             match self.coupled_newton_step(problem, &u_new, &new_active) {
-                Some(next) if self.merit(&next, problem) < self.merit(&u_new, problem) => Err(next),
+                Some(next) if self.merit(&next, problem) < self.merit(&u_new, problem) => {
+                    Next::Other(next)
+                }
                 _ => {
                     state.newton_rejections += 1;
-                    Ok(u_new)
+                    Next::SpringSolve(u_new)
                 }
             }
         } else if state.mismatches == 0 {
-            Ok(u_new)
+            Next::SpringSolve(u_new)
         } else {
-            Err(self.damped_step(u, u_new, &problem.load, &springs))
+            Next::Other(self.damped_step(u, u_new, &problem.load, &springs))
         };
         match next {
-            Ok(u_new) => {
+            Next::SpringSolve(u_new) => {
                 state.u = u_new;
                 self.set_springs(state, new_active, &forces);
             }
-            Err(next) => {
+            Next::Other(next) => {
                 state.u = next;
                 self.update_springs(problem, state);
             }
@@ -650,6 +650,15 @@ fn copy_lower(k: &DMatrix<f64>, mut out: MatMut<'_, f64>) {
         let column = k.column(j);
         column_slice(out.rb_mut(), j)[j..].copy_from_slice(&column.as_slice()[j..]);
     }
+}
+
+/// The next iterate of the contact iteration.
+enum Next {
+    /// The spring solve's own: its active set and forces (with the springs of the step just
+    /// taken) are those the iteration has computed, and are reused.
+    SpringSolve(DVector<f64>),
+    /// A Newton or damped step: its active set and forces are computed anew.
+    Other(DVector<f64>),
 }
 
 /// Which entries `ContactModel::for_each_spring_entry` visits.
