@@ -129,6 +129,8 @@ enum InSample {
     Sensor,
     /// The gap's change from the test window, fitted there.
     Gap,
+    /// An effect from an onset after the calibration window, fitted on the rows from it.
+    Onset,
 }
 
 pub fn run(args: &PanelArgs) -> Result<()> {
@@ -274,6 +276,11 @@ fn score_of(j: &serde_json::Value) -> Result<Score> {
             InSample::Gap
         } else if j["sensor"]["fitted_on_test_rows"].as_bool() == Some(true) {
             InSample::Sensor
+        } else if j["onset_effects"]["added"]
+            .as_array()
+            .is_some_and(|a| !a.is_empty())
+        {
+            InSample::Onset
         } else {
             InSample::No
         },
@@ -556,7 +563,7 @@ fn one(
         "theta_after": r.theta_after, "theta_before": r.theta_before,
         "effects": r.effects.iter().map(|e| (e.name.clone(), e.covariates.clone())).collect::<Vec<_>>(),
         "sensor": r.sensor, "alarms": r.alarms, "conclusion": r.conclusion,
-        "parameter_correction": r.parameter_correction,
+        "parameter_correction": r.parameter_correction, "onset_effects": r.onset,
     });
     Ok((score, j))
 }
@@ -668,8 +675,10 @@ fn score(
 /// exchanged or stuck gauge there, or a gap that changed there, would count as error; the
 /// figure with every correction is taken instead (in-sample for that span; the report says so:
 /// the sensor report's `fitted_on_test_rows`, the gap's `parameter_correction.
-/// fitted_on_error_rows`). The gap's correction is applied on top of the sensor corrections, so
-/// its figure holds both. Gauges set aside on every test row (no value) are left out.
+/// fitted_on_error_rows`, an effect from an onset's `onset.added`). The gap's correction is
+/// applied on top of the sensor corrections and the effects from an onset, and the sensor's
+/// figure on top of those effects, so each figure holds the ones before it. Gauges set aside on
+/// every test row (no value) are left out.
 fn test_rmse(r: &CloseLoopReport) -> f64 {
     let gap = r
         .parameter_correction
@@ -681,7 +690,12 @@ fn test_rmse(r: &CloseLoopReport) -> f64 {
         .as_ref()
         .filter(|s| s.fitted_on_test_rows)
         .and_then(|s| s.heldout_rmse_after_all_corrections.as_ref());
-    match gap.or(sensor) {
+    let onset = r
+        .onset
+        .as_ref()
+        .filter(|o| !o.added.is_empty())
+        .and_then(|o| o.error_rmse_with.as_ref());
+    match gap.or(sensor).or(onset) {
         Some(v) => bamudi::closeloop::rmse_over_gauges(v),
         None => r.heldout_rmse_total_after,
     }
@@ -763,15 +777,21 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
         .iter()
         .filter(|x| x.in_sample == InSample::Sensor)
         .count();
+    let onset = passed
+        .iter()
+        .filter(|x| x.in_sample == InSample::Onset)
+        .count();
     let _ = writeln!(
         s,
         "\nOf the {} records within 1.5x the noise, {} are scored on a figure whose corrections \
          were fitted on the test rows too: {sensor} with a sensor correction whose span reaches \
          into the test window (fitted over its whole span), {gap} with the gap's change from the \
-         test window (fitted there: no fit on earlier rows can hold it). The JSON lines keep \
-         each record's out-of-sample figure (`rmse_ratio_out_of_sample`) where it was recorded.",
+         test window (fitted there: no fit on earlier rows can hold it), {onset} with an effect \
+         from an onset after the calibration window (fitted on the rows from it). The JSON lines \
+         keep each record's out-of-sample figure (`rmse_ratio_out_of_sample`) where it was \
+         recorded.",
         passed.len(),
-        sensor + gap
+        sensor + gap + onset
     );
     let sized: Vec<bool> = effect.iter().filter_map(|x| x.size_held).collect();
     let (k, m) = (sized.iter().filter(|b| **b).count(), sized.len());

@@ -663,33 +663,38 @@ pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str)
         .collect()
 }
 
-/// A gauge set aside on more than half the calibration window's rows (a stuck or dead gauge,
-/// or one whose noise jumped, early in the record): the loop fills its cells with the model's
-/// own prediction, from a first calibration that was fitted to the faulty readings, and when
-/// those readings were most of the window the fill keeps their imprint. The gap then rests on
-/// the other gauges and on that fill, and can be confidently wrong (a gauge stuck from day 5
-/// of 60 on the FE gate: 66 ± 5 in for a gap of 90). Half the window is "most of it", set
-/// without a threshold search.
+/// Gauges set aside so early that fewer than 30 of the calibration window's rows are free of
+/// set-aside cells ([`bamudi::closeloop::CalibrationRows::Filled`]): the calibrations then
+/// cannot leave those cells out, and fill
+/// them with the model's own prediction, from a first calibration that was fitted to the faulty
+/// readings, so the fill keeps their imprint and the gap can be confidently wrong (before
+/// the loop calibrated on the rows free of set-aside cells, a gauge stuck from day 5 of 60 on
+/// the FE gate gave 66 ± 5 in for a gap of 90). A gauge set aside later is left out of the
+/// calibration, which reads the rows before it, and is not warned about.
 fn set_aside_warnings(r: &bamudi::closeloop::CloseLoopReport) -> Vec<String> {
     let Some(s) = &r.sensor else {
         return vec![];
     };
+    let Some(bamudi::closeloop::CalibrationRows::Filled { complete_rows }) = s.calibration_rows
+    else {
+        return vec![];
+    };
     s.findings
         .iter()
-        .filter(|f| f.action == bamudi::closeloop::SensorAction::SetAside)
-        .filter_map(|f| {
+        .filter(|f| {
+            f.action == bamudi::closeloop::SensorAction::SetAside && f.from_row < r.n_calibration
+        })
+        .map(|f| {
             let rows = r.n_calibration.min(f.to_row).saturating_sub(f.from_row);
-            (2 * rows > r.n_calibration).then(|| {
-                format!(
-                    "{} is set aside from day {:.2} ({}), on {:.0} % of the calibration window: its cells are filled with the model's prediction from a calibration the faulty readings shaped, and the gap after ({:.2} ± {:.2}) rests on the other gauges and that fill: treat it as unverified",
-                    f.gauges.join(", "),
-                    f.from_day,
-                    f.kind.name(),
-                    100.0 * rows as f64 / r.n_calibration.max(1) as f64,
-                    r.theta_after.mean,
-                    r.theta_after.sd
-                )
-            })
+            format!(
+                "{} is set aside from day {:.2} ({}), on {:.0} % of the calibration window, and only {complete_rows} rows of the window are free of set-aside cells, too few to calibrate on: its cells are filled with the model's prediction from a calibration the faulty readings shaped, and the gap after ({:.2} ± {:.2}) rests on the other gauges and that fill: treat it as unverified",
+                f.gauges.join(", "),
+                f.from_day,
+                f.kind.name(),
+                100.0 * rows as f64 / r.n_calibration.max(1) as f64,
+                r.theta_after.mean,
+                r.theta_after.sd
+            )
         })
         .collect()
 }
@@ -797,16 +802,17 @@ mod tests {
     use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
     use bamudi::closeloop::{CloseLoopConfig, close_loop};
 
-    /// A gauge stuck from hour 48 of a 45-day toy record (93 % of the 648-row calibration
-    /// window) is warned about, with its name and the share; one stuck from hour 600 (7 %) is
-    /// not: the warning is for a fill that most of the window's faulty readings shaped.
+    /// A gauge stuck from hour 20 of a 45-day toy record leaves 20 rows of the 648-row
+    /// calibration window free of set-aside cells, too few to calibrate on: its cells are filled
+    /// and the warning names it. Stuck from hour 48 (48 rows free) or 600, the calibrations
+    /// leave it out instead and nothing is warned.
     #[test]
-    fn a_gauge_set_aside_on_most_of_the_calibration_window_is_warned_about() {
+    fn a_gauge_set_aside_too_early_to_leave_out_is_warned_about() {
         let cfg = CloseLoopConfig::default()
             .load(toy_load())
             .parameter_name("gap")
             .column_unit("air_temp_f", "degF");
-        for (at, warned) in [(48usize, true), (600, false)] {
+        for (at, warned) in [(20usize, true), (48, false), (600, false)] {
             let mut rec = record_with(&ToyGate::default(), 1080, 41, |_, _| 0.0).unwrap();
             let v = rec.y[(at - 1, 3)];
             for i in at..rec.len() {

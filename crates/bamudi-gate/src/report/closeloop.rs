@@ -62,6 +62,7 @@ pub fn markdown(r: &CloseLoopReport) -> String {
     s.push('\n');
     rmse_table(&mut s, r);
     sensor_section(&mut s, r);
+    onset_section(&mut s, r);
     alarms_section(&mut s, r);
     track_section(&mut s, r);
     effects_section(&mut s, r);
@@ -140,16 +141,75 @@ fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
     };
     let _ = writeln!(
         s,
-        "\n| gap θ (in) | value |\n|---|---|\n| without the sensor corrections | {} |\n| with them | {} |\n\n{} cells set aside (left out of every error above).{}\n",
+        "\n| gap θ (in) | value |\n|---|---|\n| without the sensor corrections | {} |\n| with them | {} |\n\n{} cells set aside (left out of every error above).{}{}\n",
         t(&sr.theta_without_corrections),
         t(&sr.theta_with_corrections),
         sr.set_aside_cells,
+        calibration_rows(sr.calibration_rows.as_ref()),
         if sr.fitted_on_test_rows {
             " A correction reaches into the test window and was dated and sized on every row, the test window's included: for its gauge and span the error after is not fully out of sample."
         } else {
             ""
         }
     );
+}
+
+/// What the calibrations with the corrections read of the calibration window.
+fn calibration_rows(rows: Option<&bamudi::closeloop::CalibrationRows>) -> String {
+    use bamudi::closeloop::CalibrationRows as R;
+    match rows {
+        Some(R::WithoutSetAside { complete_rows, .. }) => format!(
+            " The calibrations with the corrections read the {complete_rows} rows of the calibration window where no gauge is set aside."
+        ),
+        Some(R::Filled { complete_rows }) => format!(
+            " Only {complete_rows} rows of the calibration window are free of set-aside cells, too few to calibrate on: the set-aside cells there are filled with the model's prediction, which leans the gap towards the first calibration, made on the faulty readings."
+        ),
+        Some(R::Window) | None => String::new(),
+    }
+}
+
+/// The changes seen on several gauges together after the calibration window, and each one's
+/// scores: a change of the gap, one sensor, a level change on every gauge, or a library effect
+/// from that day on (added when it scores lowest).
+fn onset_section(s: &mut String, r: &CloseLoopReport) {
+    let Some(o) = &r.onset else {
+        return;
+    };
+    let _ = writeln!(
+        s,
+        "## Changes on several gauges after the calibration window
+
+Each score is the residual sum of squares from the day on over the noise variances, plus its penalty; the lowest wins. An effect that wins is added from that day, fitted on the rows from it (the test window's included).
+
+| from day | gauges | none | gap | one sensor | level change on every gauge | effect from the day | verdict |
+|---|---|---|---|---|---|---|---|"
+    );
+    for t in &o.tests {
+        let _ = writeln!(
+            s,
+            "| {:.2} | {} | {:.0} | {:.0} | {:.0} ({}) | {} | {} | {} |",
+            t.from_day,
+            t.gauges.join(", "),
+            t.none,
+            t.structure,
+            t.sensor,
+            t.sensor_hypothesis,
+            t.steps.map_or("–".into(), |v| format!("{v:.0}")),
+            match (t.effect, &t.effect_name) {
+                (Some(v), Some(n)) => format!("{v:.0} ({n})"),
+                _ => "–".into(),
+            },
+            t.verdict
+        );
+    }
+    if let Some(v) = &o.error_rmse_with {
+        let total = bamudi::closeloop::rmse_over_gauges(v);
+        let _ = writeln!(
+            s,
+            "\nError window RMSE with the effects from an onset: {total:.3} microstrain (in-sample; the table of the error after, above, leaves them out)."
+        );
+    }
+    s.push('\n');
 }
 
 /// The sensor findings: what was corrected or set aside, from when, with the fitted size, and

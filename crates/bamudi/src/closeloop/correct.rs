@@ -12,6 +12,7 @@ use super::{EventScan, ThetaSummary, ThetaTrack};
 use crate::error::Result;
 use nalgebra::DMatrix;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
+use serde::{Deserialize, Serialize};
 
 /// What the sensor pass found before selection, and the structure-or-sensor tests it ran.
 pub(super) struct PrePass {
@@ -380,16 +381,25 @@ pub(super) fn apply_and_recalibrate(
     pre: &mut PrePass,
     first: &State,
     relabelled: Option<Relabelled>,
-) -> Result<(DMatrix<f64>, Option<State>)> {
+) -> Result<Applied> {
     let apply = |f: &[SensorFinding], fill: &DMatrix<f64>| {
         sensor::apply(f, &rec.y, fill, &rec.time_h, None)
     };
     let (mut y, mask) = apply(&pre.findings, &first.mean);
     if pre.findings.is_empty() {
-        return Ok((y, None));
+        return Ok(Applied {
+            y,
+            state: None,
+            rows: CalibrationRows::Window,
+        });
     }
+    let rows = CalibrationRows::of(lp.cal, &mask);
+    let fit_rows: &[usize] = match &rows {
+        CalibrationRows::WithoutSetAside { rows, .. } => rows,
+        _ => lp.cal,
+    };
     let calibrate = |y: &DMatrix<f64>| -> Result<State> {
-        let (model, mean, var) = lp.with_y(y).calibrate(y)?;
+        let (model, mean, var) = lp.with_y(y).with_fit_rows(fit_rows).calibrate(y)?;
         Ok(State {
             model,
             mean,
@@ -399,10 +409,10 @@ pub(super) fn apply_and_recalibrate(
         })
     };
     let n_cal = cal_end(lp);
-    let filled = (0..n_cal.min(mask.nrows())).any(|i| mask.row(i).iter().any(|m| *m));
+    let filled = matches!(rows, CalibrationRows::Filled { .. });
     let mut theta = first.model.theta_summary();
     let mut st = match relabelled {
-        Some(b) if b.y == y => b.state,
+        Some(b) if b.y == y && matches!(rows, CalibrationRows::Window) => b.state,
         _ => calibrate(&y)?,
     };
     for round in 0..ROUNDS {
@@ -424,8 +434,90 @@ pub(super) fn apply_and_recalibrate(
         y = apply(&pre.findings, &st.mean).0;
         st = calibrate(&y)?;
     }
-    Ok((y, Some(st)))
+    if let CalibrationRows::WithoutSetAside { .. } = rows {
+        // the calibration did not read the set-aside cells: filled with its own prediction
+        // they leave no residual for the effects to fit, and it stays the same calibration
+        y = apply(&pre.findings, &st.mean).0;
+    }
+    Ok(Applied {
+        y,
+        state: Some(st),
+        rows,
+    })
 }
+
+/// The sensor pass's corrections applied ([`apply_and_recalibrate`]).
+pub(super) struct Applied {
+    /// The corrected readings (set-aside cells filled with the model's prediction).
+    pub y: DMatrix<f64>,
+    /// The calibration on them (`None` without a finding).
+    pub state: Option<State>,
+    /// The calibration-window rows every later calibration reads.
+    pub rows: CalibrationRows,
+}
+
+/// Which rows of the calibration window a calibration reads once the sensor pass has set
+/// cells aside.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", tag = "basis")]
+pub enum CalibrationRows {
+    /// Every row: no cell of the calibration window is set aside.
+    Window,
+    /// The rows where no gauge is set aside: the set-aside cells are left out, not filled.
+    WithoutSetAside {
+        /// How many rows that is.
+        complete_rows: usize,
+        /// The rows (indices into the record).
+        #[serde(skip)]
+        rows: Vec<usize>,
+    },
+    /// Every row, the set-aside cells filled with the latest calibration's prediction: fewer
+    /// than [`MIN_COMPLETE_ROWS`] rows are free of set-aside cells. The fill is a fixed point,
+    /// not a calibration without the gauge (see [`apply_and_recalibrate`]).
+    Filled {
+        /// Rows of the window free of set-aside cells.
+        complete_rows: usize,
+    },
+}
+
+impl CalibrationRows {
+    /// The rows of `cal` to calibrate on, given the set-aside cells `mask`.
+    fn of(cal: &[usize], mask: &DMatrix<bool>) -> Self {
+        let complete: Vec<usize> = cal
+            .iter()
+            .copied()
+            .filter(|&i| i < mask.nrows() && !mask.row(i).iter().any(|m| *m))
+            .collect();
+        if complete.len() == cal.len() {
+            Self::Window
+        } else if complete.len() >= MIN_COMPLETE_ROWS {
+            Self::WithoutSetAside {
+                complete_rows: complete.len(),
+                rows: complete,
+            }
+        } else {
+            Self::Filled {
+                complete_rows: complete.len(),
+            }
+        }
+    }
+
+    /// The rows a calibration reads (`cal` unless some are left out).
+    pub(super) fn rows<'a>(&'a self, cal: &'a [usize]) -> &'a [usize] {
+        match self {
+            Self::WithoutSetAside { rows, .. } => rows,
+            _ => cal,
+        }
+    }
+}
+
+/// Fewest calibration-window rows free of set-aside cells that a calibration reads instead of
+/// filling those cells: the loop's own least calibration window (30 rows). Set before any
+/// panel record was run with this rule, from clean FE-gate records (24-in mesh, seeds 7-9):
+/// the first 12 hourly rows alone give the gap to ±0.16-0.18 in, the whole 864-row window to
+/// ±0.09-0.10 in, so 30 complete rows lose little against filled cells that vote for the
+/// first, faulty calibration.
+pub(super) const MIN_COMPLETE_ROWS: usize = 30;
 
 /// Re-sizes each corrected gain change whose onset is inside the calibration window (`0 <
 /// from < n_cal`; the verdict's whole-record gains start at 0) by what is left of it in
@@ -497,6 +589,11 @@ pub(super) struct PostPass {
     pub coincident: Vec<SensorFinding>,
     /// The parameter's change applied as a correction, when the track's alarm stands.
     pub parameter: Option<super::change::ParameterCorrection>,
+    /// The onsets tested for an effect from a day on ([`super::onset`]).
+    pub onset: Option<super::onset::OnsetReport>,
+    /// How many of the last of `st.effects` were added from an onset (fitted on the test
+    /// rows too: the out-of-sample error leaves them out).
+    pub onset_effects: usize,
 }
 
 /// The scan, the track, and the sensor findings after selection: each change of level on one
@@ -510,6 +607,7 @@ pub(super) fn post_pass(
     st: State,
     residual: DMatrix<f64>,
     pre: PrePass,
+    library: &[std::sync::Arc<dyn super::Effect>],
 ) -> Result<PostPass> {
     let PrePass {
         findings,
@@ -530,11 +628,18 @@ pub(super) fn post_pass(
         withheld_gap_alarm: None,
         coincident,
         parameter: None,
+        onset: None,
+        onset_effects: 0,
     };
     zero_masked(&mut post.residual, &post.mask);
     let (events, track) = super::whole_record(lp, rec, &post.st, &post.residual, &post.mask)?;
     post.events = events;
     post.track = track;
+    if lp.cfg.sensor.enabled && lp.cfg.sensor.onset_effects {
+        let before = post.st.effects.len();
+        post.onset = super::onset::onset_effects(lp, rec, &mut post, library)?;
+        post.onset_effects = post.st.effects.len() - before;
+    }
     if lp.cfg.sensor.enabled {
         sensor_findings(lp, rec, &mut post)?;
     }
@@ -693,7 +798,7 @@ fn scan_alarm_findings(
 }
 
 /// One past the last row of the calibration window.
-fn cal_end(lp: &Loop<'_>) -> usize {
+pub(super) fn cal_end(lp: &Loop<'_>) -> usize {
     lp.cal.last().map_or(0, |&c| c + 1)
 }
 
@@ -838,7 +943,9 @@ pub(super) fn theta_without(
         // nothing in the calibration window changed: the calibration is the same
         return Ok(Some(post.st.model.theta_summary()));
     }
-    let raw = lp.with_y(&rec.y);
+    // the raw readings on every row of the window: nothing is set aside without corrections
+    let raw_y = lp.with_y(&rec.y);
+    let raw = raw_y.with_fit_rows(lp.cal);
     let sum = raw.effect_sum(&post.st)?;
     Ok(Some(raw.calibrate_theta(&(&rec.y - sum))?))
 }
@@ -918,22 +1025,31 @@ pub(super) fn propagate(
 /// The residual with only the corrections whose span starts before the test window (`n_sel`
 /// rows selection used), and their set-aside cells: the error a correction found in the test
 /// window itself would make in-sample is not reported as out-of-sample.
+/// The effects added from an onset ([`super::onset`]), fitted on the test rows too, are left
+/// out in the same way.
 pub(super) fn out_of_sample(
+    lp: &Loop<'_>,
     rec: &MeasuredRecord,
     post: &PostPass,
-    n_sel: usize,
-) -> (DMatrix<f64>, DMatrix<bool>) {
+) -> Result<(DMatrix<f64>, DMatrix<bool>)> {
+    let n_sel = lp.sel.len();
     let early: Vec<SensorFinding> = post
         .findings
         .iter()
         .filter(|f| f.from_row < n_sel)
         .cloned()
         .collect();
-    let fitted = &post.y - &post.residual;
+    let mut fitted = &post.y - &post.residual;
+    if post.onset_effects > 0 {
+        let c = lp.with_y(&post.y).contributions(&post.st)?;
+        for term in &c[c.len() - post.onset_effects..] {
+            fitted -= term;
+        }
+    }
     let (y, mask) = sensor::apply(&early, &rec.y, &fitted, &rec.time_h, None);
     let mut r = &y - &fitted;
     zero_masked(&mut r, &mask);
-    (r, mask)
+    Ok((r, mask))
 }
 
 /// The sensor pass's part of the report: the findings and tests, the test window's error with
@@ -963,6 +1079,8 @@ pub(super) fn report(
         heldout_rmse_after_all_corrections: rmse_all_corrections,
         withheld_gap_alarm: post.withheld_gap_alarm.clone(),
         coincident_findings: post.coincident.clone(),
+        calibration_rows: (!post.findings.is_empty())
+            .then(|| CalibrationRows::of(lp.cal, &post.mask)),
     }))
 }
 
@@ -975,12 +1093,12 @@ pub(super) fn test_error(
     post: &PostPass,
     rmse: Vec<f64>,
     checks: &mut Vec<super::Adequacy>,
-) -> Vec<f64> {
+) -> Result<Vec<f64>> {
     if lp.test.is_empty() {
-        return rmse;
+        return Ok(rmse);
     }
-    let (r_oos, mask_oos) = out_of_sample(rec, post, lp.sel.len());
+    let (r_oos, mask_oos) = out_of_sample(lp, rec, post)?;
     checks.pop();
     checks.extend(super::test_window(lp, &r_oos, &post.st.var));
-    sensor::rmse_unmasked(&r_oos, lp.test, &mask_oos)
+    Ok(sensor::rmse_unmasked(&r_oos, lp.test, &mask_oos))
 }

@@ -183,9 +183,12 @@ impl EventScan {
 }
 
 /// Scans every gauge's residual `r` (`n x N_o`) of `rec`; the first `n_sel` rows are those
-/// the loop fitted its effects on. A gauge the sensor pass set aside (`set_aside`) on more than
-/// half its rows is not scanned: its residual there is the model's own prediction, so there is
-/// no noise left to judge a change against, and the gauge is already reported as set aside.
+/// the loop fitted its effects on. Only the rows the sensor pass did not set aside
+/// (`set_aside`) are scanned, and the gauge's noise scale is read from them: on set-aside rows
+/// the residual is the model's own prediction or a dead gauge's constant, with no noise to
+/// judge a change against (a gauge dead from day 30 used to raise an alarm for every swing of
+/// the load after it, against a noise scale of nearly zero). A gauge with fewer than four
+/// segments' worth of rows left is not scanned; it is already reported as set aside.
 pub(super) fn scan(
     rec: &MeasuredRecord,
     r: &DMatrix<f64>,
@@ -196,10 +199,11 @@ pub(super) fn scan(
     let params = cfg.params();
     let (mut scales, mut alarms) = (vec![], vec![]);
     for (g, name) in rec.gauge_names.iter().enumerate() {
-        if 2 * set_aside.column(g).iter().filter(|m| **m).count() > r.nrows() {
+        let kept: Vec<usize> = (0..r.nrows()).filter(|&i| !set_aside[(i, g)]).collect();
+        if kept.len() < 4 * params.min_segment.max(1) {
             continue;
         }
-        let col: Vec<f64> = r.column(g).iter().copied().collect();
+        let col: Vec<f64> = kept.iter().map(|&i| r[(i, g)]).collect();
         let found = detect_mean_changes(&col, &params).map_err(|e| BamudiError::Numerical {
             context: format!("event scan of gauge {name}"),
             reason: e.to_string(),
@@ -210,7 +214,12 @@ pub(super) fn scan(
             phi: found.scale.phi,
             long_run_sd: found.scale.long_run_sd,
         });
-        alarms.extend(found.changes.iter().map(|c| alarm(rec, name, c, n_sel)));
+        alarms.extend(
+            found
+                .changes
+                .iter()
+                .map(|c| alarm(rec, name, &on_rows(c, &kept), n_sel)),
+        );
     }
     mark_coincident(&mut alarms);
     alarms.sort_by(|a, b| a.onset_day.total_cmp(&b.onset_day));
@@ -220,6 +229,18 @@ pub(super) fn scan(
         scales,
         alarms,
     })
+}
+
+/// Change `c` of the series of `kept` rows, with its rows those of the record: the first row
+/// at the new level, and an interval whose row before its start is the kept row before it.
+fn on_rows(c: &MeanChange, kept: &[usize]) -> MeanChange {
+    let at = |k: usize| kept[k.min(kept.len() - 1)];
+    let (lo, hi) = c.interval;
+    MeanChange {
+        first_row_after: at(c.first_row_after),
+        interval: (at(lo.saturating_sub(1)) + usize::from(lo > 0), at(hi)),
+        ..*c
+    }
 }
 
 /// The alarm of change `c` on gauge `name`.

@@ -56,6 +56,7 @@ pub mod effects;
 mod events;
 mod features;
 mod nuisance;
+mod onset;
 mod record;
 mod search;
 mod sensor;
@@ -67,6 +68,7 @@ pub(crate) mod track;
 pub use crate::module3::posterior::ThetaSummary;
 pub use change::ParameterCorrection;
 pub use config::{CloseLoopConfig, LoadSpec};
+pub use correct::CalibrationRows;
 pub use effect::{
     Effect, EffectKind, EffectParameter, EffectReport, FitContext, Fitted, ParameterEnd, Term,
     param,
@@ -74,6 +76,7 @@ pub use effect::{
 pub use effects::LinearTerm;
 pub use events::{Alarm, AlarmWindow, EventScan, EventScanConfig, GaugeScale};
 pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperature_range};
+pub use onset::{OnsetReport, OnsetTest};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
 pub use sensor::{
     AttributionTest, SensorAction, SensorConfig, SensorFinding, SensorKind, SensorReport,
@@ -331,6 +334,11 @@ pub struct CloseLoopReport {
     /// propagated.
     #[serde(default)]
     pub theta_after_effect_sd: Option<f64>,
+    /// The changes seen on several gauges together after the calibration window, each tested
+    /// for a library effect from its day on beside the gap and one sensor, and the effects
+    /// added (`None` when no such change was seen, or `sensor.onset_effects` is off).
+    #[serde(default)]
+    pub onset: Option<OnsetReport>,
 }
 
 /// Result of [`close_loop`]: the report plus the residual series used for the plots.
@@ -391,6 +399,7 @@ pub fn close_loop_with(
         y: &rec.y,
         feats: &feats,
         cal: &w.cal,
+        fit_rows: &w.cal,
         val: &w.validation,
         sel: &w.selection,
         test: &w.test,
@@ -424,9 +433,10 @@ pub fn close_loop_with(
     };
     let base = pre.relabelled.take();
     let first = base.as_ref().map_or(&st, |b| &b.state).clone();
-    let (y_corr, recalibrated) = correct::apply_and_recalibrate(&lp, rec, &mut pre, &first, base)?;
-    let lp = lp.with_y(&y_corr);
-    if let Some(s) = recalibrated {
+    let applied = correct::apply_and_recalibrate(&lp, rec, &mut pre, &first, base)?;
+    let lp_y = lp.with_y(&applied.y);
+    let lp = lp_y.with_fit_rows(applied.rows.rows(&w.cal));
+    if let Some(s) = applied.state {
         st = s;
     }
     let (steps, conclusion) = run_steps(&lp, &mut st, library)?;
@@ -437,7 +447,7 @@ pub fn close_loop_with(
         conclusion,
         pre,
     };
-    let mut out = outcome(&lp, rec, run)?;
+    let mut out = outcome(&lp, rec, run, library)?;
     out.report.wall_time_s = started.elapsed().as_secs_f64();
     Ok(out)
 }
@@ -714,6 +724,36 @@ pub fn rmse_over_gauges(v: &[f64]) -> f64 {
 
 /// The conclusion with the sensor findings first: what was corrected or set aside is said
 /// before anything else, and "no missing effect found" is not said when something was.
+/// The conclusion with the effects added from an onset after selection ([`onset`]).
+fn with_onset(conclusion: String, onset: Option<&OnsetReport>) -> String {
+    let Some(o) = onset else {
+        return conclusion;
+    };
+    let added: Vec<String> = o
+        .tests
+        .iter()
+        .filter(|t| t.verdict == "effect")
+        .map(|t| {
+            format!(
+                "{} added from day {:.2}, where {} changed together (score {:.0} against {:.0} for a change of the parameter and {:.0} for one sensor; fitted on the rows from that day, the test window's included)",
+                t.effect_name.as_deref().unwrap_or("an effect"),
+                t.from_day,
+                t.gauges.join(", "),
+                t.effect.unwrap_or(f64::NAN),
+                t.structure,
+                t.sensor
+            )
+        })
+        .collect();
+    if added.is_empty() {
+        return conclusion;
+    }
+    let rest = conclusion
+        .strip_prefix("no missing effect found: ")
+        .unwrap_or(&conclusion);
+    format!("{rest}; after selection, {}", added.join("; "))
+}
+
 fn with_sensor(conclusion: String, sensor: Option<&SensorReport>) -> String {
     let Some(s) = sensor.filter(|s| !s.findings.is_empty()) else {
         return conclusion;
@@ -908,7 +948,12 @@ struct WindowFields {
 /// Assembles the outcome of a finished run: the selection's checks on the state it chose,
 /// then every accepted effect re-fitted on all the rows selection used and the error on the
 /// test window that selection never saw.
-fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOutcome> {
+fn outcome(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    run: Run,
+    library: &[Arc<dyn Effect>],
+) -> Result<CloseLoopOutcome> {
     let Run {
         before,
         st,
@@ -922,8 +967,18 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         rmse,
         checks: mut checks_after,
     } = final_state(lp, st)?;
-    let post = correct::post_pass(lp, rec, st, residual, pre)?;
-    let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after);
+    let post = correct::post_pass(lp, rec, st, residual, pre, library)?;
+    let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after)?;
+    let onset = post.onset.clone().map(|mut o| {
+        if !o.added.is_empty() {
+            o.error_rmse_with = Some(sensor::rmse_unmasked(
+                &post.residual,
+                lp.error_rows(),
+                &post.mask,
+            ));
+        }
+        o
+    });
     let (events, theta_track) = (post.events.clone(), post.track.clone());
     let TheGap {
         theta_after,
@@ -931,6 +986,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         effect_sd,
         sensor_report,
     } = the_gap(lp, rec, &post)?;
+    let conclusion = with_onset(conclusion, onset.as_ref());
     let conclusion = with_sensor(conclusion, sensor_report.as_ref());
     let unit = &lp.cfg.output_unit;
     let conclusion = with_alarms(conclusion, events.as_ref(), theta_track.as_ref(), unit);
@@ -971,6 +1027,7 @@ fn outcome(lp: &Loop<'_>, rec: &MeasuredRecord, run: Run) -> Result<CloseLoopOut
         wall_time_s: 0.0,
         sensor: sensor_report,
         theta_after_effect_sd: effect_sd,
+        onset,
     };
     Ok(CloseLoopOutcome {
         report,

@@ -49,6 +49,10 @@ pub(super) struct Loop<'a> {
     pub(super) y: &'a DMatrix<f64>,
     pub(super) feats: &'a Features,
     pub(super) cal: &'a [usize],
+    /// The rows a calibration reads: the calibration window, or with gauges the sensor pass
+    /// set aside in it, the window's rows where no gauge is set aside
+    /// ([`super::correct::apply_and_recalibrate`]).
+    pub(super) fit_rows: &'a [usize],
     /// The validation window (rows between the calibration and the test window).
     pub(super) val: &'a [usize],
     /// The rows selection may use (calibration and validation windows).
@@ -77,6 +81,7 @@ impl Loop<'_> {
             y,
             feats: self.feats,
             cal: self.cal,
+            fit_rows: self.fit_rows,
             val: self.val,
             sel: self.sel,
             test: self.test,
@@ -87,10 +92,18 @@ impl Loop<'_> {
         }
     }
 
+    /// The same loop calibrating on `rows` of the calibration window only.
+    pub(super) fn with_fit_rows<'b>(&'b self, rows: &'b [usize]) -> Loop<'b> {
+        Loop {
+            fit_rows: rows,
+            ..self.with_y(self.y)
+        }
+    }
+
     pub(super) fn calibrate(&self, y_adj: &DMatrix<f64>) -> Result<Calibrated> {
         let model = self.calibrator.calibrate(
-            &select_rows(self.x, self.cal),
-            &select_rows(y_adj, self.cal),
+            &select_rows(self.x, self.fit_rows),
+            &select_rows(y_adj, self.fit_rows),
         )?;
         let (mean, var) = model.predict(self.x)?;
         Ok((Arc::from(model), mean, var))
@@ -100,13 +113,18 @@ impl Loop<'_> {
     /// model or its predictions ([`Calibrator::calibrate_theta`]).
     pub(super) fn calibrate_theta(&self, y_adj: &DMatrix<f64>) -> Result<ThetaSummary> {
         self.calibrator.calibrate_theta(
-            &select_rows(self.x, self.cal),
-            &select_rows(y_adj, self.cal),
+            &select_rows(self.x, self.fit_rows),
+            &select_rows(y_adj, self.fit_rows),
         )
     }
 
     fn context<'s>(&'s self, st: &'s State) -> FitContext<'s> {
         self.context_on(st, self.cal)
+    }
+
+    /// The fit context of `st` (effects fitted on the calibration window).
+    pub(super) fn context_of<'s>(&'s self, st: &'s State) -> FitContext<'s> {
+        self.context(st)
     }
 
     /// The fit context of `st` with effects fitted on `rows`.

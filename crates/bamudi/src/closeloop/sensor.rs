@@ -60,6 +60,10 @@ pub struct SensorConfig {
     pub uncertainty_draws: usize,
     /// Seed of those draws [58].
     pub seed: u64,
+    /// Offer a change seen on several gauges after the calibration window a third answer
+    /// beside the gap and one sensor: a library effect from that day on ([`super::onset`])
+    /// [true].
+    pub onset_effects: bool,
 }
 
 impl Default for SensorConfig {
@@ -71,6 +75,7 @@ impl Default for SensorConfig {
             noise_ratio: 2.0,
             uncertainty_draws: 4,
             seed: 58,
+            onset_effects: true,
         }
     }
 }
@@ -256,6 +261,11 @@ pub struct SensorReport {
     /// structure's doing, not a sensor's.
     #[serde(default)]
     pub coincident_findings: Vec<SensorFinding>,
+    /// Which calibration-window rows the calibrations after the pass read: every row, the
+    /// rows where no gauge is set aside, or every row with the set-aside cells filled (too few
+    /// rows free of them); `None` without a finding.
+    #[serde(default)]
+    pub calibration_rows: Option<super::correct::CalibrationRows>,
 }
 
 /// The readings with every correction applied, and the set-aside cells (`true`), whose
@@ -981,6 +991,48 @@ pub(crate) fn attribute_span(
             f
         });
     (test, finding)
+}
+
+/// Scores over the rows from a change to the end of the record, on the scale of
+/// [`attribute`]'s (residual sum of squares over each gauge's noise variance from the rows
+/// before the change), for hypotheses the test does not hold ([`super::onset`]).
+pub(crate) struct SpanScores {
+    /// No change.
+    pub none: f64,
+    /// A level change on every gauge (its mean over the rows removed).
+    pub steps_all: f64,
+    var: Vec<f64>,
+    from: usize,
+    r: DMatrix<f64>,
+}
+
+impl SpanScores {
+    pub(crate) fn new(inp: &ScanInput<'_>, from: usize) -> Self {
+        let c = Change::new(inp, (from, inp.residual.nrows()));
+        let r = inp.residual;
+        let steps_all = (0..r.ncols())
+            .filter_map(|g| c.one_gauge(g, |_| 1.0).map(|(s, _, _)| c.none - s))
+            .fold(c.none, |acc, gain| acc - gain);
+        Self {
+            none: c.none,
+            steps_all,
+            var: c.var,
+            from,
+            r: r.clone(),
+        }
+    }
+
+    /// The score with `removed` (every row; only rows from the change are read) taken off.
+    pub(crate) fn with_removed(&self, removed: &DMatrix<f64>) -> f64 {
+        (0..self.r.ncols())
+            .map(|g| {
+                (self.from..self.r.nrows())
+                    .map(|i| (self.r[(i, g)] - removed[(i, g)]).powi(2))
+                    .sum::<f64>()
+                    / self.var[g]
+            })
+            .sum()
+    }
 }
 
 /// One tested change: the residual over rows `from..to`, judged against the noise variances

@@ -116,12 +116,67 @@ fn a_dead_gauge_is_set_aside_from_when_it_died() {
     assert_eq!(s.set_aside_cells, ROWS - 700);
     assert!(r.effects.is_empty(), "{:?}", r.effects);
     assert!(!gap_alarm(&r));
+    // the whole-record scan reads g4 before hour 700 only: its zeros after are no noise to
+    // judge a change against
+    assert!(r.alarms.iter().all(|a| a.subject != "g4"), "{:?}", r.alarms);
     assert!(
         r.heldout_rmse_total_after < 1.5,
         "{}",
         r.heldout_rmse_total_after
     );
     assert!(holds(&r, 90.0), "{:?}", r.theta_after);
+}
+
+/// The gauge that tells most about the gap stuck from hour 48 (early in the calibration
+/// window): set aside from then, and the calibrations read only the 48 rows before it, where no
+/// gauge is set aside, instead of filling its cells with a prediction, which would lean the gap
+/// towards the first calibration, made on the stuck readings. The gap holds 90 in.
+#[test]
+fn a_gauge_stuck_early_is_left_out_of_the_calibration_not_filled() {
+    use bamudi::closeloop::CalibrationRows;
+    let gate = ToyGate::default();
+    let (hu, hd) = (540.0, 180.0);
+    let (a, b) = (gate.strain(hu, hd, 95.0), gate.strain(hu, hd, 90.0));
+    let g = (0..a.len())
+        .max_by(|&i, &j| (a[i] - b[i]).abs().total_cmp(&(a[j] - b[j]).abs()))
+        .unwrap();
+    let at = 48;
+    let mut rec = record_with(&gate, ROWS, 35, |_, _| 0.0).unwrap();
+    let v = rec.y[(at - 1, g)];
+    for i in at..ROWS {
+        rec.y[(i, g)] = v;
+    }
+    let r = loop_on(&rec);
+    let s = r.sensor.as_ref().unwrap();
+    eprintln!(
+        "stuck g{}: {:?}\n{:?}\n{}",
+        g + 1,
+        s.findings,
+        s.calibration_rows,
+        r.conclusion
+    );
+    let f = s
+        .findings
+        .iter()
+        .find(|f| f.kind == SensorKind::Stuck)
+        .unwrap_or_else(|| panic!("no stuck gauge found: {:?}", s.findings));
+    assert_eq!(f.gauge_columns, vec![g]);
+    assert!(f.from_row.abs_diff(at) <= 1, "{f:?}");
+    assert!(
+        matches!(
+            s.calibration_rows,
+            Some(CalibrationRows::WithoutSetAside { complete_rows, .. }) if complete_rows == f.from_row
+        ),
+        "{:?}",
+        s.calibration_rows
+    );
+    assert!(holds(&r, 90.0), "{:?}", r.theta_after);
+    assert!(!gap_alarm(&r), "{:?}", r.alarms);
+    assert!(
+        r.heldout_rmse_total_after < 1.5,
+        "{}",
+        r.heldout_rmse_total_after
+    );
 }
 
 /// A real change of the gap (90 -> 100 in from hour 900, in the test window, every gauge moved
@@ -216,4 +271,67 @@ fn a_drift_or_gain_change_on_one_gauge_is_corrected_without_a_gap_alarm() {
         );
         assert!(holds(&r, 90.0), "{:?}", r.theta_after);
     }
+}
+
+/// Sunlight on three gauges from hour 900 (in the test window): a half-wave daily cycle of
+/// 3, −2.1 and 1.5 microstrain on g2, g3 and g6, a shape no library effect holds. The
+/// structure-or-sensor test's third answer takes it: a library effect from that day on (a
+/// daily harmonic or the air temperature, which follows the same day), not a step on one
+/// gauge and then another, and no gap alarm. The error with it is in-sample (fitted on the
+/// rows from its onset) and must be back near the noise; the out-of-sample figure leaves it
+/// out and is not asserted.
+#[test]
+fn an_effect_that_begins_late_on_several_gauges_is_an_effect_not_sensor_faults() {
+    let (at, amp) = (900.0, [0.0, 3.0, -2.1, 0.0, 0.0, 1.5, 0.0]);
+    let sun = move |t: f64, k: usize| {
+        if t < at {
+            return 0.0;
+        }
+        let h = t.rem_euclid(24.0);
+        amp[k] * (std::f64::consts::PI * (h - 7.0) / 12.0).sin().max(0.0)
+    };
+    let rec = record_with(&ToyGate::default(), ROWS, 36, sun).unwrap();
+    let r = loop_on(&rec);
+    let o = r.onset.as_ref().expect("an onset tested");
+    eprintln!(
+        "{:#?}\n{:?}\n{}",
+        o,
+        r.sensor.as_ref().map(|s| &s.findings),
+        r.conclusion
+    );
+    assert_eq!(o.added.len(), 1, "{o:?}");
+    let e = r
+        .effects
+        .iter()
+        .find(|e| e.parameters.iter().any(|p| p.name == "onset_day"))
+        .expect("the effect from the onset is among the effects");
+    let day = e
+        .parameters
+        .iter()
+        .find(|p| p.name == "onset_day")
+        .unwrap()
+        .values[0];
+    assert!((day - at / 24.0).abs() <= 1.0, "onset day {day}");
+    let sensor_steps: Vec<_> = r
+        .sensor
+        .iter()
+        .flat_map(|s| &s.findings)
+        .filter(|f| {
+            matches!(
+                f.kind,
+                SensorKind::Step | SensorKind::Drift | SensorKind::Gain
+            )
+        })
+        .collect();
+    assert!(sensor_steps.is_empty(), "{sensor_steps:?}");
+    assert!(!gap_alarm(&r), "{:?}", r.alarms);
+    assert!(holds(&r, 90.0), "{:?}", r.theta_after);
+    let with = o.error_rmse_with.as_ref().unwrap();
+    let total = (with.iter().map(|v| v * v).sum::<f64>() / with.len() as f64).sqrt();
+    // noise sd 1. A half-wave of amplitude A has variance 0.149 A², and the daily harmonic
+    // alone leaves 0.024 A² of it (0.21 microstrain² on g2): the right shape brings the error
+    // to about 1.02. 1.3 leaves room for a term on the air temperature, whose daily sine is
+    // the same harmonic plus a weekly swing; left as steps the panel's records stayed at
+    // 1.7-1.8x the noise
+    assert!(total < 1.3, "{with:?}");
 }
