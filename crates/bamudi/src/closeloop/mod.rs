@@ -724,6 +724,40 @@ pub fn rmse_over_gauges(v: &[f64]) -> f64 {
 
 /// The conclusion with the sensor findings first: what was corrected or set aside is said
 /// before anything else, and "no missing effect found" is not said when something was.
+/// The selection's final state, the post-selection pass on it, and the test window's error and
+/// checks after both.
+fn after_selection(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    st: State,
+    pre: correct::PrePass,
+    library: &[Arc<dyn Effect>],
+) -> Result<(correct::PostPass, Vec<f64>, Vec<Adequacy>)> {
+    let Final {
+        st,
+        residual,
+        rmse,
+        checks: mut checks_after,
+    } = final_state(lp, st)?;
+    let post = correct::post_pass(lp, rec, st, residual, pre, library)?;
+    let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after)?;
+    Ok((post, rmse_after, checks_after))
+}
+
+/// The onset step's report, with the error window's RMSE once an effect was added (in-sample).
+fn onset_report(lp: &Loop<'_>, post: &correct::PostPass) -> Option<OnsetReport> {
+    post.onset.clone().map(|mut o| {
+        if !o.added.is_empty() {
+            o.error_rmse_with = Some(sensor::rmse_unmasked(
+                &post.residual,
+                lp.error_rows(),
+                &post.mask,
+            ));
+        }
+        o
+    })
+}
+
 /// The conclusion with the effects added from an onset after selection ([`onset`]).
 fn with_onset(conclusion: String, onset: Option<&OnsetReport>) -> String {
     let Some(o) = onset else {
@@ -961,24 +995,8 @@ fn outcome(
         conclusion,
         pre,
     } = run;
-    let Final {
-        st,
-        residual,
-        rmse,
-        checks: mut checks_after,
-    } = final_state(lp, st)?;
-    let post = correct::post_pass(lp, rec, st, residual, pre, library)?;
-    let rmse_after = correct::test_error(lp, rec, &post, rmse, &mut checks_after)?;
-    let onset = post.onset.clone().map(|mut o| {
-        if !o.added.is_empty() {
-            o.error_rmse_with = Some(sensor::rmse_unmasked(
-                &post.residual,
-                lp.error_rows(),
-                &post.mask,
-            ));
-        }
-        o
-    });
+    let (post, rmse_after, checks_after) = after_selection(lp, rec, st, pre, library)?;
+    let onset = onset_report(lp, &post);
     let (events, theta_track) = (post.events.clone(), post.track.clone());
     let TheGap {
         theta_after,

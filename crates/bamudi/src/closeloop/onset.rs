@@ -220,99 +220,9 @@ pub(super) fn onset_effects(
     let effects: Vec<&Arc<dyn Effect>> = library.iter().filter(|e| offered(e.as_ref())).collect();
     let sens = sensor::sensitivity(post.st.model.as_ref(), lp.x)?;
     let (mut tests, mut added) = (vec![], vec![]);
-    let n = rec.len();
-    for (from, day, gauges) in tried {
-        let fitted = &post.y - &post.residual;
-        let inp = ScanInput {
-            rec,
-            residual: &post.residual,
-            fitted: &fitted,
-            unit: &lp.cfg.output_unit,
-            earliest: first,
-        };
-        let (test, _) = sensor::attribute("onset", &inp, &sens, from);
-        let cells = ((n - from) * rec.y.ncols()) as f64;
-        let ln = cells.ln();
-        let k = rec.y.ncols() as f64;
-        let structure = test.structure + ln + 2.0 * 2f64.ln();
-        let sensor_score = test.sensor + ln + test.penalty + 2.0 * 2f64.ln();
-        if test.verdict == "structure" {
-            // the gap's own test: a change the parameter explains better than one sensor is
-            // the track's and the gap alarm's to judge with the model itself (its response to
-            // a change of inches is not the linear one scored here)
-            tests.push(OnsetTest {
-                from_day: day,
-                gauges,
-                none: test.none,
-                structure,
-                sensor: sensor_score,
-                sensor_hypothesis: test.sensor_hypothesis,
-                steps: None,
-                effect: None,
-                effect_name: None,
-                verdict: "structure".into(),
-            });
-            continue;
-        }
-        let scores = sensor::SpanScores::new(&inp, from);
-        let steps = scores.steps_all + k * ln;
-        // every offered effect from the onset, scored with its coefficients and the choice
-        let choice = 2.0 * (effects.len().max(1) as f64).ln();
-        let mut best: Option<(f64, Fitted)> = None;
-        for e in &effects {
-            let gated = Arc::new(FromOnset {
-                inner: Arc::clone(e),
-                from_row: from,
-                from_day: day,
-                n_rows: n,
-            });
-            let ctx = lp.context_of(&post.st);
-            let Some(f) = gated.fit(&ctx, &post.residual)? else {
-                continue;
-            };
-            let mut c = f.term.contribution(&ctx)?;
-            super::correct::zero_masked(&mut c, &post.mask);
-            let p: usize = f
-                .report
-                .parameters
-                .iter()
-                .map(|b| b.values.len())
-                .sum::<usize>()
-                - 1;
-            let score = scores.with_removed(&c) + p as f64 * ln + choice;
-            if best.as_ref().is_none_or(|(s, _)| score < *s) {
-                best = Some((score, f));
-            }
-        }
-        let effect_score = best.as_ref().map(|(s, _)| *s);
-        let effect_name = best
-            .as_ref()
-            .map(|(_, f)| format!("{}({})", f.report.name, f.report.covariates.join(",")));
-        let sides = [
-            ("none", scores.none),
-            ("structure", structure),
-            ("sensor", sensor_score),
-            ("steps", steps),
-            ("effect", effect_score.unwrap_or(f64::INFINITY)),
-        ];
-        let verdict = sides
-            .iter()
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or("none", |s| s.0);
-        log::info!("onset on day {day:.2} ({}): {verdict}", gauges.join(", "));
-        tests.push(OnsetTest {
-            from_day: day,
-            gauges,
-            none: scores.none,
-            structure,
-            sensor: sensor_score,
-            sensor_hypothesis: test.sensor_hypothesis,
-            steps: Some(steps),
-            effect: effect_score,
-            effect_name: effect_name.clone(),
-            verdict: verdict.into(),
-        });
-        if let (Some((_, f)), "effect") = (best, verdict) {
+    for onset in tried {
+        let (test, best) = test_onset(lp, rec, post, &sens, &effects, onset)?;
+        if let (Some(f), "effect") = (best, test.verdict.as_str()) {
             post.st.effects.push(f);
             post.st.from_fold.push(lp.folds.len());
             let mut residual = lp.with_y(&post.y).residual(&post.st)?;
@@ -322,12 +232,122 @@ pub(super) fn onset_effects(
                 super::whole_record(lp, rec, &post.st, &post.residual, &post.mask)?;
             post.events = events;
             post.track = track;
-            added.extend(effect_name);
+            added.extend(test.effect_name.clone());
         }
+        tests.push(test);
     }
     Ok(Some(OnsetReport {
         tests,
         added,
         error_rmse_with: None,
     }))
+}
+
+/// One onset's test: every hypothesis scored on the rows from `from`, and the best effect's fit
+/// (to be added when the verdict is `effect`).
+fn test_onset(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    post: &super::correct::PostPass,
+    sens: &DMatrix<f64>,
+    effects: &[&Arc<dyn Effect>],
+    (from, day, gauges): (usize, f64, Vec<String>),
+) -> Result<(OnsetTest, Option<Fitted>)> {
+    let fitted = &post.y - &post.residual;
+    let inp = ScanInput {
+        rec,
+        residual: &post.residual,
+        fitted: &fitted,
+        unit: &lp.cfg.output_unit,
+        earliest: super::correct::cal_end(lp),
+    };
+    let (test, _) = sensor::attribute("onset", &inp, sens, from);
+    let ln = (((rec.len() - from) * rec.y.ncols()) as f64).ln();
+    let structure = test.structure + ln + 2.0 * 2f64.ln();
+    let sensor_score = test.sensor + ln + test.penalty + 2.0 * 2f64.ln();
+    let mut out = OnsetTest {
+        from_day: day,
+        gauges,
+        none: test.none,
+        structure,
+        sensor: sensor_score,
+        sensor_hypothesis: test.sensor_hypothesis,
+        steps: None,
+        effect: None,
+        effect_name: None,
+        verdict: "structure".into(),
+    };
+    if test.verdict == "structure" {
+        // the gap's own test: a change the parameter explains better than one sensor is the
+        // track's and the gap alarm's to judge with the model itself (its response to a change
+        // of inches is not the linear one scored here)
+        return Ok((out, None));
+    }
+    let scores = sensor::SpanScores::new(&inp, from);
+    let steps = scores.steps_all + rec.y.ncols() as f64 * ln;
+    let best = best_effect(lp, post, effects, &scores, (from, day), ln)?;
+    out.effect = best.as_ref().map(|(s, _)| *s);
+    out.effect_name = best
+        .as_ref()
+        .map(|(_, f)| format!("{}({})", f.report.name, f.report.covariates.join(",")));
+    let sides = [
+        ("none", scores.none),
+        ("structure", structure),
+        ("sensor", sensor_score),
+        ("steps", steps),
+        ("effect", out.effect.unwrap_or(f64::INFINITY)),
+    ];
+    let verdict = sides
+        .iter()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or("none", |s| s.0);
+    log::info!(
+        "onset on day {day:.2} ({}): {verdict}",
+        out.gauges.join(", ")
+    );
+    out.none = scores.none;
+    out.steps = Some(steps);
+    out.verdict = verdict.into();
+    Ok((out, best.map(|(_, f)| f)))
+}
+
+/// Every offered effect fitted from the onset and scored with its coefficients (`ln` of the
+/// cells each, `ln`) and the choice among the effects; the lowest score and its fit.
+fn best_effect(
+    lp: &Loop<'_>,
+    post: &super::correct::PostPass,
+    effects: &[&Arc<dyn Effect>],
+    scores: &sensor::SpanScores,
+    (from, day): (usize, f64),
+    ln: f64,
+) -> Result<Option<(f64, Fitted)>> {
+    let choice = 2.0 * (effects.len().max(1) as f64).ln();
+    let mut best: Option<(f64, Fitted)> = None;
+    for e in effects {
+        let gated = Arc::new(FromOnset {
+            inner: Arc::clone(e),
+            from_row: from,
+            from_day: day,
+            n_rows: post.y.nrows(),
+        });
+        let ctx = lp.context_of(&post.st);
+        let Some(f) = gated.fit(&ctx, &post.residual)? else {
+            continue;
+        };
+        let mut c = f.term.contribution(&ctx)?;
+        super::correct::zero_masked(&mut c, &post.mask);
+        // the fitted values, less the onset day itself
+        let p: usize = f
+            .report
+            .parameters
+            .iter()
+            .map(|b| b.values.len())
+            .sum::<usize>()
+            - 1;
+        let score = scores.with_removed(&c) + p as f64 * ln + choice;
+        if best.as_ref().is_none_or(|(s, _)| score < *s) {
+            best = Some((score, f));
+        }
+    }
+    Ok(best)
 }
