@@ -669,7 +669,7 @@ pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str)
 /// them with the model's own prediction, from a first calibration that was fitted to the faulty
 /// readings, so the fill keeps their imprint and the gap can be confidently wrong (before
 /// the loop calibrated on the rows free of set-aside cells, a gauge stuck from day 5 of 60 on
-/// the FE gate gave 66 ± 5 in for a gap of 90). A gauge set aside later is left out of the
+/// the FE gate gave 66 ± 5 in for a gap of 90, filled). A gauge set aside later is left out of the
 /// calibration, which reads the rows before it, and is not warned about.
 fn set_aside_warnings(r: &bamudi::closeloop::CloseLoopReport) -> Vec<String> {
     let Some(s) = &r.sensor else {

@@ -361,20 +361,22 @@ const FILL_SETTLED_SD: f64 = 0.1;
 ///   ([`resize_gains`]). The first calibration, fitted to readings with the change in them,
 ///   absorbs part of it, so the size measured against it is short by what was absorbed;
 ///   against a calibration on corrected readings the remainder shows, and shrinks each round.
-/// * **Set-aside cells in the calibration window** are filled with the latest calibration's
-///   prediction. Filled from the first calibration only, which was fitted to the faulty
-///   readings, they vote for its `θ` and its discrepancy; re-filled from each new calibration
-///   they vote for the latest, which the other gauges move. Rounds stop when `θ` moves less
-///   than [`FILL_SETTLED_SD`]. This is a fixed point, not a calibration without the gauge: when
-///   the fault covers most of the window the first calibration's discrepancy has learnt the
-///   faulty readings, the fill reproduces them, and the rounds do not reach the truth (panel
-///   seed 1000, a gauge stuck from day 5: 69 ± 11 in first, 66 ± 5 in after, truth 90; stuck
-///   from day 30: the loop no longer adds an offset jump to the stuck gauge's fill).
+/// * **Set-aside cells in the calibration window** are left out: every calibration reads the
+///   window's rows where no gauge is set aside ([`CalibrationRows::WithoutSetAside`]), and the
+///   cells are filled with its prediction afterwards, so that they leave no residual for the
+///   effects to fit. With fewer than [`MIN_COMPLETE_ROWS`] such rows
+///   ([`CalibrationRows::Filled`]) the cells are filled with the latest calibration's
+///   prediction and re-filled until `θ` moves less than [`FILL_SETTLED_SD`]. That is a fixed
+///   point, not a calibration without the gauge: filled from the first calibration, fitted to
+///   the faulty readings, they vote for its `θ` and its discrepancy, and when the fault covers
+///   most of the window the rounds do not reach the truth (panel seed 1000, a gauge stuck from
+///   day 5, filled: 69 ± 11 in first, 66 ± 5 in after, truth 90; read from the 119 rows before
+///   it: 90.04 ± 0.12 in).
 ///
 /// `first` is the pass's base: the first calibration, or the calibration on relabelled
 /// readings the pass kept ([`relabel`]), which is re-used when the corrected readings are the
-/// ones it was fitted to. Returns the corrected readings and the state (`None` with no
-/// finding).
+/// ones it was fitted to and no row is left out. Returns the corrected readings, the state
+/// (`None` with no finding) and the rows the calibrations read.
 pub(super) fn apply_and_recalibrate(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
