@@ -5,10 +5,11 @@
 use crate::gate::Gate;
 use crate::progress::Callback;
 use crate::{invalid, to_py};
-use bamudi::closeloop::{CloseLoopConfig, MissingPolicy, close_loop as run_loop};
 use bamudi::observe::Observer;
+use bamudi_closeloop::{CloseLoopConfig, MissingPolicy, close_loop as run_loop};
 use bamudi_gate::gate;
-use bamudi_gate::session::{self, ToleranceSpec};
+use bamudi_gate::session;
+use bamudi_gate::tolerance::ToleranceSpec;
 use pyo3::prelude::*;
 use std::sync::Arc;
 

@@ -28,7 +28,7 @@
 //! design and are design cases, not held-out ones (docs/closeloop.md, "The panel"): a gain from
 //! day 30 and from day 5, and a gauge stuck from day 5.
 use anyhow::{Context, Result, bail};
-use bamudi::closeloop::{CloseLoopConfig, CloseLoopReport, MeasuredRecord, SensorKind, close_loop};
+use bamudi_closeloop::{CloseLoopConfig, CloseLoopReport, MeasuredRecord, SensorKind, close_loop};
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
 use mitergate::ContactModel;
@@ -696,7 +696,7 @@ fn test_rmse(r: &CloseLoopReport) -> f64 {
         .filter(|o| !o.added.is_empty())
         .and_then(|o| o.error_rmse_with.as_ref());
     match gap.or(sensor).or(onset) {
-        Some(v) => bamudi::closeloop::rmse_over_gauges(v),
+        Some(v) => bamudi_closeloop::rmse_over_gauges(v),
         None => r.heldout_rmse_total_after,
     }
 }

@@ -5,8 +5,7 @@
 //! U(60, 150) in, wide enough for the gap-growth record) and print the before/after table (markdown) used in docs/closeloop.md.
 //!
 //! `cargo run --release -p bamudi-gate --example close_loop_demo [-- <element size in> [effects,...] [seed]]`
-use bamudi::BamudiError;
-use bamudi::closeloop::{CalibratedModel, Calibrator, CloseLoopConfig, close_loop};
+use bamudi_closeloop::{CalibratedModel, Calibrator, CloseLoopConfig, CloseLoopError, close_loop};
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
 use mitergate::GateConfig;
@@ -26,7 +25,7 @@ impl Calibrator for Counted {
         &self,
         x: &DMatrix<f64>,
         y: &DMatrix<f64>,
-    ) -> Result<Box<dyn CalibratedModel>, BamudiError> {
+    ) -> Result<Box<dyn CalibratedModel>, CloseLoopError> {
         let t = Instant::now();
         let out = self.inner.calibrate(x, y);
         let mut c = self.calls.lock().unwrap_or_else(|e| e.into_inner());

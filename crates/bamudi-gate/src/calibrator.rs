@@ -1,6 +1,6 @@
 //! BA-MUDI on the miter gate as the close loop's calibrator.
 //!
-//! * [`GateCalibrator::calibrate`](bamudi::closeloop::Calibrator::calibrate) runs Modules 2-3
+//! * [`GateCalibrator::calibrate`](bamudi_closeloop::Calibrator::calibrate) runs Modules 2-3
 //!   of the engine on the rows it is given (evenly thinned in time to at most
 //!   [`GateCalibrator::max_experiments`] rows, see below) and returns a [`CalibratedGate`].
 //! * [`CalibratedGate`] predicts through the engine's one Module-4 predictor: the mixture over
@@ -41,15 +41,15 @@
 //! loop would then try to explain.
 
 use crate::error::{GateAppError, Result};
-use crate::session::{
+use crate::tolerance::{
     ToleranceSpec, build_tolerances, check_tolerance_keys, check_tolerance_specs,
 };
-use bamudi::closeloop::{CalibratedModel, Calibrator, ThetaSummary};
 use bamudi::observe::Observer;
 use bamudi::{
     BamudiError, Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode,
     EstimatorParams, Experiments, SupportPolicy,
 };
+use bamudi_closeloop::{CalibratedModel, Calibrator, CloseLoopError, ThetaSummary};
 use mitergate::{ContactModel, GateConfig, GateMultiLevel, MultiLevelSpec};
 use mlmodel::{ObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
@@ -282,11 +282,12 @@ fn theta_summary(cal: &Calibration) -> ThetaSummary {
     cal.module3().posterior.summary(0)
 }
 
-/// The engine's error of an application error.
-fn engine_error(e: GateAppError) -> BamudiError {
+/// The close loop's error of an application error.
+fn loop_error(e: GateAppError) -> CloseLoopError {
     match e {
-        GateAppError::Engine(e) => e,
-        e => BamudiError::Calibration(e.to_string()),
+        GateAppError::Engine(e) => e.into(),
+        GateAppError::CloseLoop(e) => e,
+        e => CloseLoopError::Calibration(e.to_string()),
     }
 }
 
@@ -295,16 +296,20 @@ impl Calibrator for GateCalibrator {
         &self,
         x: &DMatrix<f64>,
         y: &DMatrix<f64>,
-    ) -> bamudi::Result<Box<dyn CalibratedModel>> {
+    ) -> bamudi_closeloop::Result<Box<dyn CalibratedModel>> {
         match self.calibrate_gate(x, y) {
             Ok(m) => Ok(Box::new(m)),
-            Err(e) => Err(engine_error(e)),
+            Err(e) => Err(loop_error(e)),
         }
     }
 
     /// Modules 2-3 only: no adequacy or physics checks (they change no number of Module 3).
-    fn calibrate_theta(&self, x: &DMatrix<f64>, y: &DMatrix<f64>) -> bamudi::Result<ThetaSummary> {
-        let (cal, _, _) = self.run(x, y, Checks::Skip).map_err(engine_error)?;
+    fn calibrate_theta(
+        &self,
+        x: &DMatrix<f64>,
+        y: &DMatrix<f64>,
+    ) -> bamudi_closeloop::Result<ThetaSummary> {
+        let (cal, _, _) = self.run(x, y, Checks::Skip).map_err(loop_error)?;
         Ok(theta_summary(&cal))
     }
 }
@@ -358,24 +363,28 @@ impl CalibratedGate {
 }
 
 impl CalibratedModel for CalibratedGate {
-    fn predict(&self, x: &DMatrix<f64>) -> bamudi::Result<(DMatrix<f64>, DMatrix<f64>)> {
+    fn predict(&self, x: &DMatrix<f64>) -> bamudi_closeloop::Result<(DMatrix<f64>, DMatrix<f64>)> {
         let (mean, var) = self.predictor()?.output_moments(x)?;
         let noise = self.cal.sigma_eps().powi(2);
         Ok((mean, var.add_scalar(noise)))
     }
 
-    fn predict_at_theta(&self, x: &DMatrix<f64>, theta: &[f64]) -> bamudi::Result<DMatrix<f64>> {
+    fn predict_at_theta(
+        &self,
+        x: &DMatrix<f64>,
+        theta: &[f64],
+    ) -> bamudi_closeloop::Result<DMatrix<f64>> {
         let thetas: Vec<Vec<f64>> = theta.iter().map(|t| vec![*t]).collect();
-        self.predictor()?.outputs_at_theta(x, &thetas)
+        Ok(self.predictor()?.outputs_at_theta(x, &thetas)?)
     }
 
     fn predict_at_thetas(
         &self,
         x: &DMatrix<f64>,
         thetas: &[f64],
-    ) -> bamudi::Result<Vec<DMatrix<f64>>> {
+    ) -> bamudi_closeloop::Result<Vec<DMatrix<f64>>> {
         let thetas: Vec<Vec<f64>> = thetas.iter().map(|t| vec![*t]).collect();
-        self.predictor()?.outputs_at_thetas(x, &thetas)
+        Ok(self.predictor()?.outputs_at_thetas(x, &thetas)?)
     }
 
     fn theta_summary(&self) -> ThetaSummary {

@@ -6,6 +6,9 @@ pub enum GateAppError {
     /// The calibration engine failed.
     #[error(transparent)]
     Engine(#[from] bamudi::BamudiError),
+    /// The close loop failed (a measured record, its configuration, a step of the loop).
+    #[error(transparent)]
+    CloseLoop(#[from] bamudi_closeloop::CloseLoopError),
     /// The gate model (build, condensation, contact, simulators) failed.
     #[error(transparent)]
     Gate(#[from] mitergate::GateError),

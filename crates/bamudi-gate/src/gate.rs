@@ -2,8 +2,8 @@
 //! exactly the calibrated model, and the gate's record layout for the close loop.
 
 use crate::error::{GateAppError, Result};
-use crate::session::{ToleranceSpec, build_tolerances};
-use bamudi::closeloop::{CloseLoopConfig, IngestConfig, LoadSpec, MeasuredRecord};
+use crate::tolerance::{ToleranceSpec, build_tolerances};
+use bamudi_closeloop::{CloseLoopConfig, IngestConfig, LoadSpec, MeasuredRecord};
 use mitergate::data::field::{FieldConfig, FieldRecord, simulate};
 use mitergate::{ContactModel, GateConfig, GateMultiLevel, GateSummary, MultiLevelSpec};
 use mlmodel::{ObservableModel, UnobservableModel};
@@ -113,17 +113,6 @@ pub fn ingest_config(model: &GateMultiLevel) -> IngestConfig {
     IngestConfig::new(&["h_up", "h_down"], &gauges)
 }
 
-/// Reads a gate's field record with every check of
-/// [`session::record_from_table`](crate::session::record_from_table) (gauge readings, the
-/// gate's input domain, informative rows); errors name the file, line and column.
-pub fn read_record(
-    path: &Path,
-    model: &GateMultiLevel,
-    cfg: &IngestConfig,
-) -> Result<MeasuredRecord> {
-    crate::session::read_record(path, model, cfg)
-}
-
 /// The truth's contact model of a reality: the as-built gate (with the truth's mesh) built
 /// and condensed, with the reality's wall support; the reality is checked against `drawing`
 /// first.
@@ -135,14 +124,6 @@ pub fn build_truth(
     let (built, _, _) = build(&reality.truth_gate(drawing)?)?;
     let params = reality.contact_params(built.params().clone());
     Ok(ContactModel::new(built.gate().clone(), params)?)
-}
-
-/// The load history of a record: its levels and times.
-pub fn load_history(rec: &MeasuredRecord) -> Result<crate::record_fatigue::LoadHistory> {
-    let x = (0..rec.len())
-        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
-        .collect();
-    crate::record_fatigue::LoadHistory::new(x, rec.time_h.clone())
 }
 
 /// Checks every row's levels against the gate's input domain.
@@ -221,7 +202,7 @@ pub fn as_measured(
     model: &GateMultiLevel,
     label: &str,
 ) -> Result<MeasuredRecord> {
-    let data = bamudi::closeloop::parse_csv(&rec.to_csv_string(), label, &ingest_config(model))?;
+    let data = bamudi_closeloop::parse_csv(&rec.to_csv_string(), label, &ingest_config(model))?;
     check_record(&data, model)?;
     Ok(data)
 }

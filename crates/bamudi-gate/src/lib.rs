@@ -5,7 +5,7 @@
 //!   assembled), the saved model file, and the gate's record layout for the close loop;
 //! * [`paper`]: the paper's case study (`cargo xtask reproduce-paper`): both scenarios of
 //!   Table 1 on the default gate, scored against the synthetic truth;
-//! * [`calibrator`]: BA-MUDI on the gate as the close loop's [`bamudi::closeloop::Calibrator`];
+//! * [`calibrator`]: BA-MUDI on the gate as the close loop's [`bamudi_closeloop::Calibrator`];
 //! * [`report`]: `results.json`, `report.md` and SVG plots of a calibration and of a close-loop
 //!   run;
 //! * [`output`]: results directories written atomically (staging directory, then rename);
@@ -34,5 +34,6 @@ pub mod progress;
 pub mod record_fatigue;
 pub mod report;
 pub mod session;
+pub mod tolerance;
 
 pub use error::{GateAppError, Result};

@@ -434,3 +434,11 @@ pub fn summary(r: &RecordFatigue) -> String {
     }
     s
 }
+
+/// The load history of a record: its levels and times.
+pub fn load_history(rec: &bamudi_closeloop::MeasuredRecord) -> Result<LoadHistory> {
+    let x = (0..rec.len())
+        .map(|i| [rec.x[(i, 0)], rec.x[(i, 1)]])
+        .collect();
+    LoadHistory::new(x, rec.time_h.clone())
+}

@@ -7,22 +7,20 @@
 use crate::calibrator::GateCalibrator;
 use crate::error::{GateAppError, Result};
 use crate::gate::SavedModel;
-use bamudi::closeloop::{IngestConfig, MeasuredRecord};
+use crate::tolerance::{ToleranceSpec, check_tolerance_keys, check_tolerance_specs};
 use bamudi::data::Table;
 use bamudi::module3::posterior::{GridWarning, ThetaPosterior};
 use bamudi::observe::Observer;
 use bamudi::{Calibrate, Calibration, CalibrationConfig, CalibrationParams, Experiments};
+use bamudi_closeloop::{IngestConfig, MeasuredRecord};
 use mitergate::contact::ContactParams;
 use mitergate::data::truth::{self, Scenario};
 use mitergate::inp::{ImportSpec, InpModel};
 use mitergate::reality::Reality;
-use mitergate::{
-    ContactForceModel, ContactModel, GateConfig, GateMultiLevel, MAX_GAUGE_READING_MICROSTRAIN,
-    StrainModel,
-};
-use mlmodel::{BuildTolerance, Memo, ObservableModel, UnobservableModel};
+use mitergate::{ContactModel, GateConfig, GateMultiLevel, MAX_GAUGE_READING_MICROSTRAIN};
+use mlmodel::{ObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// Where a gate comes from: a configuration (the embedded default or a gate TOML) or a
@@ -130,110 +128,6 @@ pub struct CalibrateSpec {
     /// marginal mode; none by default.
     #[serde(default)]
     pub tolerances: Vec<ToleranceSpec>,
-}
-
-/// One declared tolerance of the gate's build: a numeric gate-configuration field (dotted
-/// key, e.g. `skin_plate.thickness`) known to a relative standard deviation.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct ToleranceSpec {
-    /// The field's dotted key in the gate configuration.
-    pub key: String,
-    /// Its standard deviation relative to the drawing's value (in `(0, 0.5]`).
-    pub relative_sd: f64,
-}
-
-/// Checks declared tolerances without a gate: every relative sd in `(0, 0.5]`, no key declared
-/// twice, and the marginal coefficient `mode` (the only one that integrates them). Errors name
-/// `label` and `tolerances[i]`.
-pub fn check_tolerance_specs(
-    specs: &[ToleranceSpec],
-    mode: bamudi::CoefficientMode,
-    label: &str,
-) -> Result<()> {
-    for (i, t) in specs.iter().enumerate() {
-        if !(t.relative_sd.is_finite() && t.relative_sd > 0.0 && t.relative_sd <= 0.5) {
-            return Err(GateAppError::Invalid(format!(
-                "{label}: tolerances[{i}].relative_sd must lie in (0, 0.5], got {}",
-                t.relative_sd
-            )));
-        }
-    }
-    if let Some((i, t)) = specs
-        .iter()
-        .enumerate()
-        .find(|(i, t)| specs[..*i].iter().any(|o| o.key == t.key))
-    {
-        return Err(GateAppError::Invalid(format!(
-            "{label}: tolerances[{i}].key {:?} is declared twice (its variance would count twice)",
-            t.key
-        )));
-    }
-    if !specs.is_empty() && mode != bamudi::CoefficientMode::Marginal {
-        return Err(GateAppError::Invalid(format!(
-            "{label}: `tolerances` are integrated only by the marginal mode; remove them or set \
-             coefficients = \"marginal\" in [calibration]"
-        )));
-    }
-    Ok(())
-}
-
-/// Checks every declared tolerance against the drawing `gate`: the key names a numeric field,
-/// and the gate stays valid one standard deviation either side. Errors name `label` and
-/// `tolerances[i].key` or `.relative_sd`.
-pub fn check_tolerance_keys(specs: &[ToleranceSpec], gate: &GateConfig, label: &str) -> Result<()> {
-    for (i, t) in specs.iter().enumerate() {
-        // the drawing itself is valid: a failure at x 1 is the key's
-        Reality::scaled_field(gate, &t.key, 1.0)
-            .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
-        for factor in [1.0 - t.relative_sd, 1.0 + t.relative_sd] {
-            Reality::scaled_field(gate, &t.key, factor).map_err(|e| {
-                GateAppError::Invalid(format!("{label}: tolerances[{i}].relative_sd: {e}"))
-            })?;
-        }
-    }
-    Ok(())
-}
-
-/// The gate's models (strains and contact forces) rebuilt at one standard deviation either
-/// side of each declared tolerance of `drawing`; errors name `label`, the tolerance's index
-/// and key.
-pub fn build_tolerances(
-    specs: &[ToleranceSpec],
-    drawing: Option<&GateConfig>,
-    label: &str,
-) -> Result<Vec<BuildTolerance<Memo<ContactForceModel>, StrainModel>>> {
-    let mut out = Vec::with_capacity(specs.len());
-    for (i, t) in specs.iter().enumerate() {
-        let Some(drawing) = drawing else {
-            return Err(GateAppError::Invalid(format!(
-                "{label}: tolerances[{i}] ({}): tolerances need a gate configuration, not an \
-                 imported deck",
-                t.key
-            )));
-        };
-        let side = |factor: f64| -> Result<(Memo<ContactForceModel>, StrainModel)> {
-            let cfg = Reality::scaled_field(drawing, &t.key, factor)
-                .map_err(|e| GateAppError::Invalid(format!("{label}: tolerances[{i}].key: {e}")))?;
-            let (contact, _) = mitergate::build_contact(&cfg).map_err(|e| {
-                GateAppError::Invalid(format!(
-                    "{label}: tolerances[{i}] ({}) at {factor} x the drawing: {e}",
-                    t.key
-                ))
-            })?;
-            let strain = StrainModel::new(contact.gate());
-            // one solve per experiment and round at the posterior mode: no memo needed
-            Ok((Memo::new(ContactForceModel::new(contact), 0), strain))
-        };
-        let ((u_lo, low), (u_hi, high)) = (side(1.0 - t.relative_sd)?, side(1.0 + t.relative_sd)?);
-        out.push(BuildTolerance {
-            name: t.key.clone(),
-            low,
-            high,
-            responses: Some((u_lo, u_hi)),
-        });
-    }
-    Ok(out)
 }
 
 fn default_terms() -> [usize; 2] {
@@ -487,7 +381,7 @@ pub fn record_from_table(
     ingest: &IngestConfig,
 ) -> Result<MeasuredRecord> {
     let gauges: Vec<&str> = ingest.gauge_columns.iter().map(String::as_str).collect();
-    let rec = bamudi::closeloop::from_table(table, ingest)?;
+    let rec = bamudi_closeloop::from_table(table, ingest)?;
     check_gauge_readings(table, &gauges)?;
     crate::gate::check_record(&rec, model)?;
     if gauges.is_empty() {
@@ -644,7 +538,7 @@ pub fn warning_lines(warnings: &[GridWarning], key: &str) -> Vec<String> {
 /// its prior, as [`posterior_warnings`] for `calibrate`), as lines starting with `key`
 /// ([`warning_lines`]; none when the loop's model is not a gate calibration), then one per
 /// gauge set aside on most of the calibration window ([`set_aside_warnings`]).
-pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str) -> Vec<String> {
+pub fn close_loop_warnings(out: &bamudi_closeloop::CloseLoopOutcome, key: &str) -> Vec<String> {
     let set_aside = set_aside_warnings(&out.report);
     let any: &dyn std::any::Any = out.model.as_ref();
     let Some(gate) = any.downcast_ref::<crate::calibrator::CalibratedGate>() else {
@@ -664,25 +558,25 @@ pub fn close_loop_warnings(out: &bamudi::closeloop::CloseLoopOutcome, key: &str)
 }
 
 /// Gauges set aside so early that fewer than 30 of the calibration window's rows are free of
-/// set-aside cells ([`bamudi::closeloop::CalibrationRows::Filled`]): the calibrations then
+/// set-aside cells ([`bamudi_closeloop::CalibrationRows::Filled`]): the calibrations then
 /// cannot leave those cells out, and fill
 /// them with the model's own prediction, from a first calibration that was fitted to the faulty
 /// readings, so the fill keeps their imprint and the gap can be confidently wrong (before
 /// the loop calibrated on the rows free of set-aside cells, a gauge stuck from day 5 of 60 on
 /// the FE gate gave 66 ± 5 in for a gap of 90, filled). A gauge set aside later is left out of the
 /// calibration, which reads the rows before it, and is not warned about.
-fn set_aside_warnings(r: &bamudi::closeloop::CloseLoopReport) -> Vec<String> {
+fn set_aside_warnings(r: &bamudi_closeloop::CloseLoopReport) -> Vec<String> {
     let Some(s) = &r.sensor else {
         return vec![];
     };
-    let Some(bamudi::closeloop::CalibrationRows::Filled { complete_rows }) = s.calibration_rows
+    let Some(bamudi_closeloop::CalibrationRows::Filled { complete_rows }) = s.calibration_rows
     else {
         return vec![];
     };
     s.findings
         .iter()
         .filter(|f| {
-            f.action == bamudi::closeloop::SensorAction::SetAside && f.from_row < r.n_calibration
+            f.action == bamudi_closeloop::SensorAction::SetAside && f.from_row < r.n_calibration
         })
         .map(|f| {
             let rows = r.n_calibration.min(f.to_row).saturating_sub(f.from_row);
@@ -770,8 +664,8 @@ pub fn gate_calibrator(
 }
 
 /// A close-loop configuration from TOML text (missing keys take their defaults), checked.
-pub fn close_loop_config_from_toml(text: &str) -> Result<bamudi::closeloop::CloseLoopConfig> {
-    let cfg: bamudi::closeloop::CloseLoopConfig =
+pub fn close_loop_config_from_toml(text: &str) -> Result<bamudi_closeloop::CloseLoopConfig> {
+    let cfg: bamudi_closeloop::CloseLoopConfig =
         toml::from_str(text).map_err(|e| GateAppError::Serde {
             context: "close-loop configuration (TOML)".into(),
             reason: e.to_string(),
@@ -799,8 +693,8 @@ pub fn export_deck(cfg: &GateConfig) -> Result<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use bamudi::closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
-    use bamudi::closeloop::{CloseLoopConfig, close_loop};
+    use bamudi_closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
+    use bamudi_closeloop::{CloseLoopConfig, close_loop};
 
     /// A gauge stuck from hour 20 of a 45-day toy record leaves 20 rows of the 648-row
     /// calibration window free of set-aside cells, too few to calibrate on: its cells are filled

@@ -381,7 +381,13 @@ impl<'a> Calibrate<'a> {
         }
         let mut seconds = 0.0;
         let report = self.stage(Stage::Adequacy, &mut seconds, || {
-            Ok(adequacy::assess(p, cal, params).unwrap_or_else(|e| {
+            let state = || cal.marginal_state();
+            let subject = adequacy::Subject {
+                module3: cal.module3(),
+                x: cal.x_experiments(),
+                state: &state,
+            };
+            Ok(adequacy::assess(p, &subject, params).unwrap_or_else(|e| {
                 log::warn!("adequacy checks failed to run: {e}");
                 AdequacyReport::not_assessed(format!("the checks failed: {e}"), params.family_alpha)
             }))

@@ -99,15 +99,7 @@ pub enum BamudiError {
         /// Message.
         reason: String,
     },
-    /// Not enough data rows for a step (e.g. the close-the-loop split).
-    #[error("too few rows for {what}: got {got}")]
-    TooFewRows {
-        /// What needs the rows.
-        what: String,
-        /// Rows available.
-        got: usize,
-    },
-    /// A calibration (through the close-the-loop `Calibrator` interface) failed.
+    /// A calibration failed (an input it cannot use, a step that left nothing to report).
     #[error("calibration failed: {0}")]
     Calibration(String),
 }

@@ -1,6 +1,8 @@
 //! `bamudi`: Bayesian calibration of multi-level models with an unobservable distributed
 //! response (BA-MUDI, paper Modules 2-4), generic over the [`mlmodel`] traits. The engine knows
-//! no application: the miter gate of the paper is one user of it (crate `bamudi-gate`).
+//! no application: the miter gate of the paper is one user of it (crate `bamudi-gate`). Closing
+//! the loop with a measured record (finding and adding the effects a calibrated model misses)
+//! is a crate above this one, `bamudi-closeloop`.
 //!
 //! # Reading order
 //!
@@ -15,8 +17,7 @@
 //!    strategy (the paper's, or conditioned on `θ`), grid quadrature or MCMC.
 //! 5. [`module4`]: the one predictor of responses and outputs with bands (Eq. 44, 52).
 //! 6. [`data`]: CSV tables with located errors (`ndarray`), experiments, atomic writes.
-//! 7. [`closeloop`]: find what a calibrated model misses in a measured record.
-//! 8. [`adequacy`]: the verdict on every (marginal-mode) calibration: is the model adequate
+//! 7. [`adequacy`]: the verdict on every (marginal-mode) calibration: is the model adequate
 //!    for the data, and if not, is it a sensor or the model's form?
 //!
 //! # Example
@@ -30,7 +31,6 @@
 
 pub mod adequacy;
 pub mod calibration;
-pub mod closeloop;
 pub mod data;
 pub mod error;
 pub mod module2;
@@ -46,14 +46,14 @@ pub mod validation;
 #[cfg(doctest)]
 pub struct ReadmeDoctest;
 
-pub use adequacy::{AdequacyParams, AdequacyReport, Verdict};
+pub use adequacy::{AdequacyReport, Verdict};
 pub use calibration::{Calibrate, Calibration, Timings, calibrate};
 pub use data::Experiments;
 pub use error::{BamudiError, Result};
 pub use module3::posterior::{SupportPolicy, ThetaPosterior};
 pub use module4::{Band, DrawPaths, Predictor};
 pub use params::{
-    CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode, CoefficientScales,
-    DiscrepancyPresence, EstimatorParams, MarginalPrior, Marginalisation, McmcConfig, RhoSearch,
-    RidgeParams, SamplingRule,
+    AdequacyParams, CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode,
+    CoefficientScales, DiscrepancyPresence, EstimatorParams, MarginalPrior, Marginalisation,
+    McmcConfig, RhoSearch, RidgeParams, SamplingRule,
 };

@@ -554,7 +554,7 @@ pub struct CalibrationParams {
     /// The coefficients' prior in the marginal mode.
     pub marginal: MarginalPrior,
     /// The adequacy checks run after Module 3.
-    pub adequacy: crate::adequacy::AdequacyParams,
+    pub adequacy: AdequacyParams,
     /// Fit the strongest calibration without a discrepancy at its `θ` posterior's support
     /// points ([`crate::module3::no_discrepancy::NoDiscrepancyFit`], "baseline (b)"), which
     /// [`crate::Predictor::no_discrepancy_response`] predicts from (default `true`). It costs
@@ -583,7 +583,7 @@ impl Default for CalibrationParams {
             mcmc: McmcConfig::default(),
             coefficients: CoefficientMode::Marginal,
             marginal: MarginalPrior::default(),
-            adequacy: crate::adequacy::AdequacyParams::default(),
+            adequacy: AdequacyParams::default(),
             no_discrepancy_fit: true,
             seed: 2021,
             threads: None,
@@ -818,5 +818,25 @@ impl CalibrationConfig {
             reason: e.to_string(),
         })?;
         params.check()
+    }
+}
+
+/// Settings of the adequacy checks (TOML section `[adequacy]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct AdequacyParams {
+    /// Run the checks after Module 3.
+    pub enabled: bool,
+    /// Family-wise error rate of the p-value checks (Holm). 0.01 rather than 0.05: the
+    /// hyper-parameters are plug-ins, and a false alarm sends an engineer to a gate.
+    pub family_alpha: f64,
+}
+
+impl Default for AdequacyParams {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            family_alpha: 0.01,
+        }
     }
 }

@@ -3,8 +3,6 @@
 
 #[path = "../../mlmodel/tests/apps/beam_app.rs"]
 mod beam_app;
-mod closeloop;
-mod fuzz;
 
 use bamudi::module2::estimator::{CoefficientEstimator, ExactLinearEstimator};
 use bamudi::module2::training::{self, LinearParts, TrainingSpec, XContext};

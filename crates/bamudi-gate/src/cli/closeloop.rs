@@ -2,11 +2,11 @@
 //! calibrator of the gate.
 use super::{GateArgs, build_gate, gate_source};
 use anyhow::{Context, Result};
-use bamudi::closeloop::{
-    CloseLoopConfig, CloseLoopOutcome, CloseLoopReport, MeasuredRecord, MissingPolicy, close_loop,
-};
 use bamudi::observe::Observer;
 use bamudi::{CalibrationConfig, CoefficientMode};
+use bamudi_closeloop::{
+    CloseLoopConfig, CloseLoopOutcome, CloseLoopReport, MeasuredRecord, MissingPolicy, close_loop,
+};
 use bamudi_gate::calibrator::{CalibratedGate, GateCalibrator};
 use bamudi_gate::gate;
 use bamudi_gate::output::StagedDir;
@@ -14,7 +14,7 @@ use bamudi_gate::progress::Bars;
 use bamudi_gate::record_fatigue::{self, RecordFatigue, RecordFatigueOptions, record_fatigue};
 use bamudi_gate::report::calibration::ReportInputs;
 use bamudi_gate::session::{self, GateSource};
-use bamudi_gate::session::{ToleranceSpec, check_tolerance_keys, check_tolerance_specs};
+use bamudi_gate::tolerance::{ToleranceSpec, check_tolerance_keys, check_tolerance_specs};
 use mitergate::{QuoinBlockModel, QuoinBlockParams};
 use mlmodel::UnobservableModel;
 use std::path::PathBuf;
@@ -160,7 +160,7 @@ pub fn run(c: &CloseLoopCmd, gate_args: &GateArgs, seed: Option<u64>) -> Result<
     if c.impute {
         ingest.missing = MissingPolicy::Interpolate;
     }
-    let rec = gate::read_record(&c.data, model, &ingest)?;
+    let rec = session::read_record(&c.data, model, &ingest)?;
     let cfg = gate::close_loop_config(cfg, &rec);
     let out = close_loop(&rec, &calibrator, &cfg)?;
     let warnings = session::close_loop_warnings(&out, &format!("--gap-prior {lo},{hi}"));
@@ -219,7 +219,7 @@ fn loop_fatigue(out: &CloseLoopOutcome, rec: &MeasuredRecord, seed: u64) -> Resu
         QuoinBlockParams::default(),
         model.unobservable.coordinates().to_vec(),
     )?;
-    let history = gate::load_history(rec)?;
+    let history = record_fatigue::load_history(rec)?;
     let opts = RecordFatigueOptions {
         seed,
         ..RecordFatigueOptions::default()

@@ -200,10 +200,11 @@ fn over_record(
 /// The record's levels and times (no gauge column needed; each row checked against the
 /// gate's input domain, naming the file and line).
 fn load_history(record: &std::path::Path, model: &GateMultiLevel) -> Result<LoadHistory> {
-    let ingest = bamudi::closeloop::IngestConfig::new(&["h_up", "h_down"], &[]);
-    let rec = bamudi_gate::gate::read_record(record, model, &ingest)
+    let ingest = bamudi_closeloop::IngestConfig::new(&["h_up", "h_down"], &[]);
+    let rec = bamudi_gate::session::read_record(record, model, &ingest)
         .with_context(|| format!("--record {}", record.display()))?;
-    bamudi_gate::gate::load_history(&rec).with_context(|| format!("--record {}", record.display()))
+    bamudi_gate::record_fatigue::load_history(&rec)
+        .with_context(|| format!("--record {}", record.display()))
 }
 
 /// The hot spot: the quoin point of the largest mean damage rate.

@@ -36,6 +36,7 @@ pub use truth::{DiscrepancyShape, Truth};
 pub use crate::baselines::NormalTangential;
 use crate::baselines::{Baselines, ConditionForces, DeltaScore, ErrorTally, SeenSubspace};
 use crate::error::{GateAppError, Result};
+use crate::paper::figures::location_a;
 use crate::paper::{ForceRmse, build_gate, gate_model, prior_mean_response};
 use bamudi::module2::estimator::FittedEstimator;
 use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
@@ -998,14 +999,6 @@ impl Setup<'_> {
             force_z: (mean - truth_f[a]) / sd.max(1e-300),
         })
     }
-}
-
-/// The quoin point of location A: the first at or above a quarter of the quoin height (the
-/// paper's Fig. 10 marks A low on the quoin, above the gap, where the bearing force is
-/// largest).
-pub fn location_a(gate: &mitergate::CondensedGate) -> usize {
-    gate.nu_points
-        .partition_point(|&z| z < 0.25 * gate.quoin_height)
 }
 
 /// The standard normal CDF.

@@ -8,7 +8,7 @@
 //!   cycle on a daily tailwater swing, Fig. 21's shape): truth, before (the prior-mean model),
 //!   the best fit without a discrepancy, and after with its band: RMSEs and band coverage.
 //!   Location A is the first quoin point at or above a quarter of the quoin height
-//!   ([`crate::coverage::location_a`]): the paper's Fig. 10 marks A low on the quoin, above the
+//!   ([`location_a`]): the paper's Fig. 10 marks A low on the quoin, above the
 //!   gap, where the bearing force is large; a quarter of the height (190.5 in) lies above every
 //!   gap of the prior (≤ 165 in), so A is always in contact and its force is never the gap's
 //!   edge, whose error is θ's.
@@ -179,7 +179,7 @@ pub fn force_history(
 ) -> Result<ForceHistory> {
     let gate = contact.gate();
     let nu = gate.n_points();
-    let a = crate::coverage::location_a(gate);
+    let a = location_a(gate);
     let hours: Vec<f64> = (0..=7 * QUARTERS_PER_DAY).map(|q| q as f64 / 4.0).collect();
     let predictor = cal.predictor(model)?;
     let day: Vec<[[f64; 2]; 6]> = hours[..QUARTERS_PER_DAY]
@@ -252,4 +252,12 @@ impl ForceHistory {
             tangential: comp(1),
         }
     }
+}
+
+/// The quoin point of location A: the first at or above a quarter of the quoin height (the
+/// paper's Fig. 10 marks A low on the quoin, above the gap, where the bearing force is
+/// largest).
+pub fn location_a(gate: &mitergate::CondensedGate) -> usize {
+    gate.nu_points
+        .partition_point(|&z| z < 0.25 * gate.quoin_height)
 }

@@ -6,8 +6,8 @@ use super::plot::{
 };
 use crate::error::{GateAppError, Result};
 use crate::record_fatigue::RecordFatigue;
-use bamudi::closeloop::{CloseLoopOutcome, CloseLoopReport};
 use bamudi::module3::marginal::ToleranceEstimate;
+use bamudi_closeloop::{CloseLoopOutcome, CloseLoopReport};
 use plotters::prelude::*;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -89,7 +89,7 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
         "| **all** | **{:.3}** | **{:.3}** |\n",
         r.heldout_rmse_total_before, r.heldout_rmse_total_after
     );
-    let t = |x: &bamudi::closeloop::ThetaSummary| {
+    let t = |x: &bamudi_closeloop::ThetaSummary| {
         format!(
             "{:.2} ± {:.2} (95 %: {:.2} – {:.2})",
             x.mean, x.sd, x.ci95.0, x.ci95.1
@@ -105,7 +105,7 @@ fn rmse_table(s: &mut String, r: &CloseLoopReport) {
 }
 
 /// The sensor findings' table and the gap with and without the corrections.
-fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
+fn findings_table(s: &mut String, sr: &bamudi_closeloop::SensorReport) {
     let _ = writeln!(
         s,
         "| gauge(s) | kind | action | fitted size (± sd) | span (days) | found by | evidence |\n|---|---|---|---|---|---|---|"
@@ -122,8 +122,8 @@ fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
             f.gauges.join(" <-> "),
             f.kind.name(),
             match f.action {
-                bamudi::closeloop::SensorAction::Corrected => "corrected",
-                bamudi::closeloop::SensorAction::SetAside => "set aside",
+                bamudi_closeloop::SensorAction::Corrected => "corrected",
+                bamudi_closeloop::SensorAction::SetAside => "set aside",
             },
             f.from_day,
             f.to_day,
@@ -131,7 +131,7 @@ fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
             f.evidence
         );
     }
-    let t = |x: &Option<bamudi::closeloop::ThetaSummary>| {
+    let t = |x: &Option<bamudi_closeloop::ThetaSummary>| {
         x.map_or("–".into(), |x| {
             format!(
                 "{:.2} ± {:.2} (95 %: {:.2} – {:.2})",
@@ -155,8 +155,8 @@ fn findings_table(s: &mut String, sr: &bamudi::closeloop::SensorReport) {
 }
 
 /// What the calibrations with the corrections read of the calibration window.
-fn calibration_rows(rows: Option<&bamudi::closeloop::CalibrationRows>) -> String {
-    use bamudi::closeloop::CalibrationRows as R;
+fn calibration_rows(rows: Option<&bamudi_closeloop::CalibrationRows>) -> String {
+    use bamudi_closeloop::CalibrationRows as R;
     match rows {
         Some(R::WithoutSetAside { complete_rows, .. }) => format!(
             " The calibrations with the corrections read the {complete_rows} rows of the calibration window where no gauge is set aside."
@@ -203,7 +203,7 @@ Each score is the residual sum of squares from the day on over the noise varianc
         );
     }
     if let Some(v) = &o.error_rmse_with {
-        let total = bamudi::closeloop::rmse_over_gauges(v);
+        let total = bamudi_closeloop::rmse_over_gauges(v);
         let _ = writeln!(
             s,
             "\nError window RMSE with the effects from an onset: {total:.3} microstrain (in-sample; the table of the error after, above, leaves them out)."
@@ -325,7 +325,7 @@ fn gap_correction(s: &mut String, r: &CloseLoopReport) {
         }
         _ => "no one-row step (the track's levels, interpolated)".into(),
     };
-    let rms = bamudi::closeloop::rmse_over_gauges(&p.error_rmse);
+    let rms = bamudi_closeloop::rmse_over_gauges(&p.error_rmse);
     let _ = writeln!(
         s,
         "**The gap's change, applied:** every row predicted at the tracked gap, {step}. The \
@@ -752,8 +752,8 @@ fn plot_rmse(r: &CloseLoopReport, path: &Path) -> Result<()> {
 }
 
 /// The gap through the record: window estimates, the smoothed track and its 95 % band.
-fn plot_track(t: &bamudi::closeloop::ThetaTrack, path: &Path) -> Result<()> {
-    let pts = |f: &dyn Fn(&bamudi::closeloop::TrackPoint) -> f64| {
+fn plot_track(t: &bamudi_closeloop::ThetaTrack, path: &Path) -> Result<()> {
+    let pts = |f: &dyn Fn(&bamudi_closeloop::TrackPoint) -> f64| {
         t.points.iter().map(|p| (p.day, f(p))).collect::<Vec<_>>()
     };
     let estimates: Vec<(f64, f64)> = t
@@ -778,7 +778,7 @@ fn plot_track(t: &bamudi::closeloop::ThetaTrack, path: &Path) -> Result<()> {
 
 /// The change alarm as vertical lines over the band's range: the day it was raised (solid) and
 /// its onset's 95 % interval (dashed); none without an alarm.
-fn alarm_marks(t: &bamudi::closeloop::ThetaTrack) -> Vec<Series> {
+fn alarm_marks(t: &bamudi_closeloop::ThetaTrack) -> Vec<Series> {
     let Some(a) = &t.alarm else {
         return vec![];
     };

@@ -297,9 +297,8 @@ impl Base {
         let e = bamudi::Experiments::from_table(&table, &["h_up", "h_down"], &GAUGES)
             .expect("base experiments");
         assert_eq!(e.len(), EXPERIMENT_ROWS);
-        let ingest = bamudi::closeloop::IngestConfig::new(&["h_up", "h_down"], &GAUGES);
-        let rec =
-            bamudi::closeloop::parse_csv(&record, "record.csv", &ingest).expect("base record");
+        let ingest = bamudi_closeloop::IngestConfig::new(&["h_up", "h_down"], &GAUGES);
+        let rec = bamudi_closeloop::parse_csv(&record, "record.csv", &ingest).expect("base record");
         assert_eq!(rec.len(), RECORD_ROWS);
         Self {
             exps,

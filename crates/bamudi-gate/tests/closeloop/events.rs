@@ -102,7 +102,7 @@ fn late_events_on_one_gauge_are_found_and_dated_within_a_day() {
                 let what: Vec<String> = s.findings.iter().map(|f| f.describe()).collect();
                 eprintln!("{shape:?} seed {seed} on {name} from day {onset:.2}: {what:?}");
             }
-            let near = |a: &&bamudi::closeloop::Alarm| {
+            let near = |a: &&bamudi_closeloop::Alarm| {
                 &a.gauge == name
                     && a.onset_day >= onset - 1.0
                     && a.onset_day <= onset + shape.ramp_days() + 1.0

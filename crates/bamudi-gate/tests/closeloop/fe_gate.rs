@@ -10,10 +10,10 @@
 //! passed at full size too; the bounds below were not changed with it.
 
 use super::*;
-use bamudi::closeloop::{Calibrator, EffectReport, MeasuredRecord, SensorKind};
+use bamudi_closeloop::{Calibrator, EffectReport, MeasuredRecord, SensorKind};
 use bamudi_gate::calibrator::GateCalibrator;
 use bamudi_gate::gate;
-use bamudi_gate::session::ToleranceSpec;
+use bamudi_gate::tolerance::ToleranceSpec;
 use mitergate::data::field::OffsetJump;
 use mitergate::{ContactModel, GateConfig};
 use std::sync::OnceLock;
@@ -237,7 +237,7 @@ fn fe_gate_an_event_in_the_last_days_is_an_alarm() {
         "{a:?}"
     );
     // `Test` (was `Heldout`): the alarm labels now follow the test window (from day 48)
-    assert_eq!(a.window, bamudi::closeloop::AlarmWindow::Test);
+    assert_eq!(a.window, bamudi_closeloop::AlarmWindow::Test);
     assert!(
         !r.conclusion.starts_with("no missing effect"),
         "{}",
@@ -323,7 +323,7 @@ fn run_with_sensor_fault(
     out
 }
 
-fn holds_true_gap(r: &bamudi::closeloop::CloseLoopReport) -> bool {
+fn holds_true_gap(r: &bamudi_closeloop::CloseLoopReport) -> bool {
     r.theta_after.ci95.0 <= TRUE_GAP && TRUE_GAP <= r.theta_after.ci95.1
 }
 

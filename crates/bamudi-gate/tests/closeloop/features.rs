@@ -5,7 +5,7 @@
 //! vary; nothing below is a form the field simulator or the effect library contains.
 
 use super::*;
-use bamudi::closeloop::effects::Selection;
+use bamudi_closeloop::effects::Selection;
 use rand::{RngExt, SeedableRng, rngs::StdRng};
 
 /// Noise sd of the records (microstrain), the FieldConfig default.
@@ -359,11 +359,11 @@ fn run_without_operational(rec: &FieldRecord) -> CloseLoopOutcome {
     let ingest = IngestConfig::new(&["h_up", "h_down"], &gauges);
     let data = parse_csv(&rec.to_csv_string(), "simulated.csv", &ingest).unwrap();
     let cfg = toy_config(&data);
-    let library: Vec<_> = bamudi::closeloop::effects::default_library(&data, &cfg)
+    let library: Vec<_> = bamudi_closeloop::effects::default_library(&data, &cfg)
         .into_iter()
         .filter(|e| e.name() != "operational_event_response")
         .collect();
-    bamudi::closeloop::close_loop_with(
+    bamudi_closeloop::close_loop_with(
         &data,
         &GridCalibrator::new(ToyGate::default(), GAP_BOUNDS),
         &cfg,

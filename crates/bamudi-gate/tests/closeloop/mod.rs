@@ -8,8 +8,8 @@ mod features;
 mod scenarios;
 mod track;
 
-use bamudi::closeloop::testing::{GridCalibrator, ToyGate, toy_load};
-use bamudi::closeloop::{
+use bamudi_closeloop::testing::{GridCalibrator, ToyGate, toy_load};
+use bamudi_closeloop::{
     CloseLoopConfig, CloseLoopOutcome, IngestConfig, MeasuredRecord, close_loop, parse_csv,
 };
 use mitergate::data::field::{FieldConfig, FieldEffects, FieldRecord, simulate};

@@ -4,7 +4,7 @@
 //! records. Checkpoints are weekly (days 7, 14, ..., 56).
 
 use super::*;
-use bamudi::closeloop::ThetaTrack;
+use bamudi_closeloop::ThetaTrack;
 
 /// The record of `seed` with its gap following `path(day)` instead of the constant 90 in.
 fn with_gap_path(seed: u64, path: &dyn Fn(f64) -> f64) -> FieldRecord {
@@ -178,7 +178,7 @@ fn correction_failure(out: &CloseLoopOutcome, at: f64, test_start: f64) -> Optio
         .map(|a| a.onset_day)
         .collect();
     // a gauge set aside on the whole window has no value (NaN): left out
-    let rms = bamudi::closeloop::rmse_over_gauges(&p.error_rmse);
+    let rms = bamudi_closeloop::rmse_over_gauges(&p.error_rmse);
     eprintln!(
         "opening at day {at}: step {:?} {:?}, error RMSE {rms:.2} (in-sample {}), gauge alarms {} \
          (without the correction {}), at the opening {gauge_alarms_at:?}",
@@ -282,7 +282,7 @@ fn a_sudden_opening_on_an_as_built_gate_is_dated() {
         // as-built misfit stays in it.
         let r = &out.report;
         let p = r.parameter_correction.as_ref().expect("the alarm stands");
-        let gauge = |a: &&bamudi::closeloop::AlarmSummary| a.subject != "parameter";
+        let gauge = |a: &&bamudi_closeloop::AlarmSummary| a.subject != "parameter";
         let left = r.alarms.iter().filter(gauge).count();
         let at_opening = r
             .alarms

@@ -284,7 +284,7 @@ struct AsBuiltSkin {
 
 impl AsBuiltSkin {
     fn new() -> Self {
-        use bamudi_gate::session::{ToleranceSpec, build_tolerances};
+        use bamudi_gate::tolerance::{ToleranceSpec, build_tolerances};
         use mitergate::{GateConfig, MultiLevelSpec, reality::Reality};
         let mut drawing = GateConfig::default();
         drawing.mesh.element_size = 24.0;

@@ -5,9 +5,9 @@
 
 use super::residual::ResidualModel;
 use super::{ConditionCheck, FaultKind, GaugeCheck, SensorFault};
-use crate::closeloop::stats::{chi2_sf, ljung_box};
 use crate::error::Result;
 use nalgebra::{DMatrix, DVector};
+use numerics::stats::{chi2_sf, ljung_box};
 
 /// Lags of the Ljung-Box test on a gauge's whitened deletion residuals.
 pub(crate) const LJUNG_BOX_LAGS: usize = 10;

@@ -28,35 +28,16 @@ mod checks;
 mod residual;
 mod verdict;
 
+pub use crate::params::AdequacyParams;
 pub use verdict::holm;
 
-use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
 use crate::module2::Problem;
-use crate::module3::model_rows;
+use crate::module3::marginal::MarginalState;
+use crate::module3::{Module3, model_rows};
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-
-/// Settings of the adequacy checks (TOML section `[adequacy]`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct AdequacyParams {
-    /// Run the checks after Module 3.
-    pub enabled: bool,
-    /// Family-wise error rate of the p-value checks (Holm). 0.01 rather than 0.05: the
-    /// hyper-parameters are plug-ins, and a false alarm sends an engineer to a gate.
-    pub family_alpha: f64,
-}
-
-impl Default for AdequacyParams {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            family_alpha: 0.01,
-        }
-    }
-}
 
 /// The verdict.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -372,17 +353,27 @@ impl AdequacyReport {
     }
 }
 
+/// What the checks read of a calibration ([`crate::Calibration`] makes it).
+pub(crate) struct Subject<'a> {
+    /// Module 3's result.
+    pub module3: &'a Module3,
+    /// The experiments' inputs.
+    pub x: &'a DMatrix<f64>,
+    /// The marginal mode's covariance state, made when first needed.
+    pub state: &'a dyn Fn() -> Result<std::sync::Arc<MarginalState>>,
+}
+
 /// Runs the checks of a marginal-mode calibration on its own data.
 pub(crate) fn assess<U, O>(
     p: &Problem<'_, U, O>,
-    cal: &Calibration,
+    cal: &Subject<'_>,
     params: &AdequacyParams,
 ) -> Result<AdequacyReport>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let Some(fit) = cal.module3().marginal.as_ref() else {
+    let Some(fit) = cal.module3.marginal.as_ref() else {
         return Ok(AdequacyReport::not_assessed(
             "the checks use the marginal mode's covariance; this calibration's coefficient \
              mode has none",
@@ -424,14 +415,14 @@ fn verdict_of(failed: &[FailedCheck]) -> Verdict {
 /// The residual model at the posterior mode and the observations' layout.
 fn residual_model<U, O>(
     p: &Problem<'_, U, O>,
-    cal: &Calibration,
+    cal: &Subject<'_>,
 ) -> Result<(residual::ResidualModel, checks::Layout)>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
     let fit =
-        cal.module3().marginal.as_ref().ok_or_else(|| {
+        cal.module3.marginal.as_ref().ok_or_else(|| {
             BamudiError::Calibration("adequacy checks need the marginal fit".into())
         })?;
     let (n_e, n_o) = (p.exps.len(), p.exps.y.ncols());
@@ -440,7 +431,7 @@ where
     let rows = model_rows(p, &theta)?;
     let (a, b) = (flat(&rows.ag), flat(&rows.b));
     let mut cols = vec![a.clone()];
-    let sd = cal.module3().posterior.sd();
+    let sd = cal.module3.posterior.sd();
     for (j, &(lo, hi)) in p.model.prior.bounds().iter().enumerate() {
         let h = sd.get(j).copied().unwrap_or(0.0).max(1e-3 * (hi - lo));
         let (mut up, mut down) = (theta.clone(), theta.clone());
@@ -453,7 +444,7 @@ where
     }
     let x = DMatrix::from_columns(&cols);
     let y = flat(&p.exps.y);
-    let state = cal.marginal_state()?;
+    let state = (cal.state)()?;
     let cov = state.covariance();
     let rm =
         residual::ResidualModel::new(cov.whitened_factor()?, cov.t(), cov.sigma2(), &x, &y - &b)?;
@@ -569,7 +560,7 @@ fn family(gauges: &[GaugeCheck], cond: &ConditionCheck, faults: &[SensorFault]) 
 /// Singular values of `B D_a` at the reference experiment, the posterior-to-prior variance
 /// along each seen direction, and the `ρ`-`θ` correlation.
 fn identifiability(
-    cal: &Calibration,
+    cal: &Subject<'_>,
     fit: &crate::module3::marginal::MarginalFit,
 ) -> Result<Identifiability> {
     let amps = &fit.amplitudes;
@@ -578,7 +569,7 @@ fn identifiability(
         .collect();
     let i_ref = active.get(active.len() / 2).copied().unwrap_or(0);
     let ax: Vec<f64> = amps.row(i_ref).iter().copied().collect();
-    let state = cal.marginal_state()?;
+    let state = (cal.state)()?;
     let (_, b) = state.basis();
     let bd = DMatrix::from_fn(b.nrows(), b.ncols(), |q, k| b[(q, k)] * ax[k]);
     let svd = bd.clone().svd(false, true);
@@ -586,8 +577,8 @@ fn identifiability(
         context: "identifiability: SVD of B D_a".into(),
         reason: "no right singular vectors".into(),
     })?;
-    let x: Vec<f64> = cal.x_experiments().row(i_ref).iter().copied().collect();
-    let cross = state.cross_cov(fit, &x, &ax, cal.x_experiments());
+    let x: Vec<f64> = cal.x.row(i_ref).iter().copied().collect();
+    let cross = state.cross_cov(fit, &x, &ax, cal.x);
     let post = state.coefficient_cov(fit, &x, &ax, &cross);
     let scale = DMatrix::from_fn(ax.len(), ax.len(), |i, j| match (i == j, ax[i] > 0.0) {
         (true, true) => 1.0 / ax[i],
