@@ -5,7 +5,7 @@
 use crate::model::{Model, ModelDescription, ModelSpec, RunState, call_outputs, to_matrix};
 use crate::progress::Callback;
 use crate::{invalid, to_py};
-use bamudi::module3::posterior::ThetaPosterior;
+use bamudi::posterior::ThetaPosterior;
 use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
 use bamudi::{Calibrate, CalibrationConfig, CalibrationParams, CoefficientMode, Experiments};
 use mlmodel::{LinearObservableModel, PredictionModel};
@@ -330,7 +330,7 @@ impl ModelCalibration {
                                     .nodes
                                     .iter()
                                     .min_by(|a, b| {
-                                        let d = |n: &bamudi::module3::marginal::MarginalNode| {
+                                        let d = |n: &bamudi::posterior::MarginalNode| {
                                             n.theta
                                                 .iter()
                                                 .zip(t)

@@ -650,14 +650,14 @@ mod tests {
     fn inclusive_shares_count_each_function_once_per_sample() {
         let script = "xtask 1 [000] 1.0: cycles:\n\
             \t 55 mitergate::contact::solve::h1234 (/x)\n\
-            \t 66 bamudi::module3::run (/x)\n\
-            \t 77 bamudi::module3::run (/x)\n\
+            \t 66 bamudi::posterior::run (/x)\n\
+            \t 77 bamudi::posterior::run (/x)\n\
             \n\
             xtask 1 [000] 2.0: cycles:\n\
             \t 88 libm_exp (/x)\n\
-            \t 99 bamudi::module3::run (/x)\n";
+            \t 99 bamudi::posterior::run (/x)\n";
         let shares = inclusive_shares(script);
-        assert_eq!(shares[0], ("bamudi::module3::run".to_string(), 1.0));
+        assert_eq!(shares[0], ("bamudi::posterior::run".to_string(), 1.0));
         assert_eq!(
             shares[1],
             ("mitergate::contact::solve::h1234".to_string(), 0.5)

@@ -4,7 +4,7 @@
 use crate::plots::{line_plot, series};
 use anyhow::{Context, Result, bail};
 use bamudi::CoefficientMode;
-use bamudi::module2::estimator::LstmSettings;
+use bamudi::surrogate::LstmSettings;
 use bamudi_gate::coverage::{self, CoverageOptions, CoverageReport, LEVELS, RANK_BINS};
 use bamudi_gate::report::plot::CATEGORICAL;
 use indicatif::{ProgressBar, ProgressStyle};

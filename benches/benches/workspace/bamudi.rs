@@ -1,7 +1,7 @@
 //! Criterion benchmarks for `bamudi`: the Module-3 likelihood (Eq. 40/51) at one `θ` for
 //! `N_e = 500`, `N_o = 7` (`N_s = 3500`), alone and for 30 `θ` at once (the grid's batches), and
 //! the one-off Cholesky factorisation of `V`.
-use bamudi::module3::likelihood::{FactoredCovariance, assemble_covariance};
+use bamudi::internals::{FactoredCovariance, assemble_covariance};
 use criterion::Criterion;
 use nalgebra::DMatrix;
 

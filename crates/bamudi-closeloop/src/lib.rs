@@ -70,7 +70,7 @@ pub(crate) mod stats;
 pub mod testing;
 pub(crate) mod track;
 
-pub use bamudi::module3::posterior::ThetaSummary;
+pub use bamudi::posterior::ThetaSummary;
 pub use config::{CloseLoopConfig, EventScanConfig, LoadSpec, SensorConfig, TrackConfig};
 pub use correct::ParameterCorrection;
 pub use correct::{OnsetReport, OnsetTest};

@@ -51,7 +51,7 @@ pub enum CalibrationRows {
         rows: Vec<usize>,
     },
     /// Every row, the set-aside cells filled with the latest calibration's prediction: fewer
-    /// than [`MIN_COMPLETE_ROWS`] rows are free of set-aside cells. The fill is a fixed point,
+    /// than `MIN_COMPLETE_ROWS` rows are free of set-aside cells. The fill is a fixed point,
     /// not a calibration without the gauge (the loop re-calibrates on the filled readings until
     /// the fill settles).
     Filled {
@@ -198,7 +198,7 @@ impl SensorFinding {
     }
 }
 
-/// The structure-or-sensor test of one change (see [`attribute`]).
+/// The structure-or-sensor test of one change (see `attribute`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AttributionTest {
     /// What was tested (`gap alarm`, or a gauge's change of level).

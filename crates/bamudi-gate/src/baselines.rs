@@ -7,7 +7,7 @@
 //! * **(a) prior mean**: the model averaged over the gap prior with `ρ = 1` and no
 //!   discrepancy (Eq. 2): where a user starts, and the weakest baseline;
 //! * **(b) no discrepancy**: the strongest calibration without a discrepancy, `ρ` and `θ`
-//!   fitted ([`bamudi::module3::no_discrepancy`],
+//!   fitted ([`bamudi::posterior`],
 //!   [`bamudi::Predictor::no_discrepancy_response`]): what the discrepancy must beat;
 //! * **(c) calibrated**: the calibration's corrected force (Module 4's posterior mean);
 //! * **(d) oracle split**: `ρ* g(θ*)`, the truth's own model part, whose error is the true

@@ -349,7 +349,7 @@ pub fn record_fatigue(
         sampling_step_h: history.median_step_h(),
         n_draws: opts.n_draws,
         before: per_1000(before.finish(block)),
-        after: bamudi::module4::empirical_band(by_point),
+        after: bamudi::predict::empirical_band(by_point),
         truth: true_counters.map(|mut c| per_1000(c.finish(block))),
         hot_spot: HotSpot::default(),
     };

@@ -1,6 +1,6 @@
 //! The executor of Modules 2-3 ([`Calibrate`], [`calibrate`]) and its result ([`Calibration`]).
 //!
-//! The executor runs the stages of [`crate::module2`] and [`crate::module3`] in order, times
+//! The executor runs the stages of [`crate::surrogate`] and [`crate::posterior`] in order, times
 //! each one and reports it to the [`Observer`]; the stages themselves neither read the clock
 //! nor print. A [`Calibration`] holds the checked configuration, what it needs to know of the
 //! data and the model, the results of both modules and the timings; Module 4 is its
@@ -9,13 +9,13 @@
 use crate::adequacy::{self, AdequacyReport, Attribution, Check};
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
-use crate::module2::estimator::FittedEstimator;
-use crate::module2::gps::CoefficientGps;
-use crate::module2::training::LinearParts;
-use crate::module2::{self, Module2, Problem};
-use crate::module3::{self, Method, Module3, marginal};
 use crate::observe::{Event, Observer, Silent, Stage};
 use crate::params::CalibrationConfig;
+use crate::posterior::{self, Method, Module3, marginal};
+use crate::surrogate::estimator::FittedEstimator;
+use crate::surrogate::gps::CoefficientGps;
+use crate::surrogate::training::LinearParts;
+use crate::surrogate::{self, Module2, Problem};
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -174,10 +174,10 @@ impl<'a> Calibrate<'a> {
         let p = Problem::new(model, exps, self.cfg, self.observer)?;
         let mut t = Timings::default();
         let training = self.stage(Stage::TrainingSet, &mut t.training_set_s, || {
-            module2::training_set(&p)
+            surrogate::training_set(&p)
         })?;
         let estimator = self.stage(Stage::Estimator, &mut t.estimator_s, || {
-            module2::fit_estimator(&p, training.as_ref())
+            surrogate::fit_estimator(&p, training.as_ref())
         })?;
         let pool = training.as_ref().map_or(0, |s| s.pool_size);
         drop(training);
@@ -283,7 +283,7 @@ impl<'a> Calibrate<'a> {
         let p = Problem::new(model, exps, self.cfg, self.observer)?;
         previous.check_module2_reuse(&p)?;
         let mut t = Timings::default();
-        let ctx = self.stage(Stage::Rho, &mut t.rho_s, || module2::contexts(&p))?;
+        let ctx = self.stage(Stage::Rho, &mut t.rho_s, || surrogate::contexts(&p))?;
         self.conclude(p, previous.module2.clone(), ctx, t)
     }
 
@@ -300,12 +300,12 @@ impl<'a> Calibrate<'a> {
         O: LinearObservableModel,
     {
         let (ctx, rho, alpha_hat) = self.stage(Stage::Rho, &mut t.rho_s, || {
-            let ctx = module2::contexts(&p)?;
-            let (rho, alpha) = module2::rho_and_alpha(&p, &estimator, &ctx)?;
+            let ctx = surrogate::contexts(&p)?;
+            let (rho, alpha) = surrogate::rho_and_alpha(&p, &estimator, &ctx)?;
             Ok((ctx, rho, alpha))
         })?;
         let gps = self.stage(Stage::CoefficientGps, &mut t.gp_s, || {
-            module2::coefficient_gps(&p, &alpha_hat)
+            surrogate::coefficient_gps(&p, &alpha_hat)
         })?;
         let m2 = Module2 {
             x_bounds: p.x_bounds.clone(),
@@ -324,20 +324,20 @@ impl<'a> Calibrate<'a> {
         &self,
         p: Problem<'_, U, O>,
         m2: Module2,
-        ctx: Vec<module2::training::XContext>,
+        ctx: Vec<surrogate::training::XContext>,
         mut t: Timings,
     ) -> Result<Calibration>
     where
         U: UnobservableModel,
         O: LinearObservableModel,
     {
-        let m3 = match module3::method::<U, O>(self.cfg.coefficients) {
+        let m3 = match posterior::method::<U, O>(self.cfg.coefficients) {
             Method::Modular(strategy) => {
                 let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
-                    module3::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
+                    posterior::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
                 })?;
                 self.stage(Stage::Module3, &mut t.module3_s, || {
-                    module3::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
+                    posterior::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
                 })?
             }
             Method::Marginal => self.stage(Stage::Module3, &mut t.module3_s, || {
@@ -500,7 +500,7 @@ impl Calibration {
     /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
     /// `N x K` matrices): the coefficient GPs, plus, in the conditional coefficient mode, the
     /// shift `Σ_k(x, X) w_k` of the posterior-averaged `α̂(θ)`.
-    pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    pub(crate) fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
         let gps = self.coefficient_gps();
         let (mut mean, var) = gps.predict(x)?;
         if let Some(w) = &self.module3.alpha_correction {

@@ -8,17 +8,22 @@
 //!
 //! 1. [`params`]: what a user sets ([`CalibrationParams`], TOML or setters), checked once into
 //!    an immutable [`CalibrationConfig`].
-//! 2. [`calibration`]: the executor ([`Calibrate`], [`calibrate()`]) that runs the stages,
-//!    times them and reports them to an [`observe::Observer`]; its result, [`Calibration`].
-//! 3. [`module2`]: training set (Eq. 27), estimator (Eq. 29: exact linear-Gaussian, `smartcore`
-//!    ridge, or the paper's LSTM from `seqnet`), `ρ*` (Eq. 30), `α̂` (Eq. 32), coefficient GPs
-//!    (Eq. 33-37).
-//! 4. [`module3`]: the `θ` posterior with the Eq.-51 covariance, the coefficient mode as a
-//!    strategy (the paper's, or conditioned on `θ`), grid quadrature or MCMC.
-//! 5. [`module4`]: the one predictor of responses and outputs with bands (Eq. 44, 52).
-//! 6. [`data`]: CSV tables with located errors (`ndarray`), experiments, atomic writes.
-//! 7. [`adequacy`]: the verdict on every (marginal-mode) calibration: is the model adequate
+//! 2. The executor ([`Calibrate`], [`calibrate()`]) runs the stages, times them and reports
+//!    them to an [`observe::Observer`]; its result is a [`Calibration`].
+//! 3. [`surrogate`] (the paper's Module 2): the training set (Eq. 27), the coefficient
+//!    estimator (Eq. 29: exact linear-Gaussian, `smartcore` ridge, or the paper's LSTM from
+//!    `seqnet`), `ρ*` (Eq. 30), `α̂` (Eq. 32) and the coefficient GPs (Eq. 33-37).
+//! 4. [`posterior`] (Module 3): the posterior of `θ` under the chosen coefficient mode, on a
+//!    grid or by Metropolis, with and without a discrepancy, and the two weighed by evidence.
+//! 5. [`predict`] (Module 4): the one [`Predictor`] of responses and outputs with bands
+//!    (Eq. 44, 52), their moments and joint draws.
+//! 6. [`adequacy`]: the verdict on every (marginal-mode) calibration: is the model adequate
 //!    for the data, and if not, is it a sensor or the model's form?
+//! 7. [`data`]: CSV tables with located errors (`ndarray`), experiments, atomic writes;
+//!    [`validation`]: coverage and rank statistics of replicate studies.
+//!
+//! [`internals`] exposes the building blocks (likelihood, MCMC, training set, estimators) to
+//! the workspace's tests and benchmarks; it is not part of the API a user needs.
 //!
 //! # Example
 //!
@@ -30,15 +35,16 @@
 //! (Eq. 31 smears `g_u`).
 
 pub mod adequacy;
-pub mod calibration;
+mod calibration;
 pub mod data;
-pub mod error;
-pub mod module2;
-pub mod module3;
-pub mod module4;
+mod error;
+pub mod internals;
 pub mod observe;
 mod optim;
 pub mod params;
+pub mod posterior;
+pub mod predict;
+pub mod surrogate;
 pub mod validation;
 
 /// The README's example, compiled and run as a doc test.
@@ -50,10 +56,10 @@ pub use adequacy::{AdequacyReport, Verdict};
 pub use calibration::{Calibrate, Calibration, Timings, calibrate};
 pub use data::Experiments;
 pub use error::{BamudiError, Result};
-pub use module3::posterior::{SupportPolicy, ThetaPosterior};
-pub use module4::{Band, DrawPaths, Predictor};
 pub use params::{
     AdequacyParams, CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode,
     CoefficientScales, DiscrepancyPresence, EstimatorParams, MarginalPrior, Marginalisation,
     McmcConfig, RhoSearch, RidgeParams, SamplingRule,
 };
+pub use posterior::{SupportPolicy, ThetaPosterior, ThetaSummary};
+pub use predict::{Band, DrawPaths, Predictor};

@@ -1,6 +1,6 @@
 //! What a running calibration tells the outside world: progress, stage timings and epochs,
 //! reported to an [`Observer`] (argmin's executor/observer split). The algorithms never print
-//! and never read the clock; the executor in [`crate::calibration`] times each [`Stage`] and
+//! and never read the clock; the executor in `calibration` times each [`Stage`] and
 //! reports it. Diagnostics that are not progress (e.g. a GP refit that was discarded) go to the
 //! `log` facade instead.
 //!

@@ -180,7 +180,7 @@ impl Default for Marginalisation {
     }
 }
 
-/// The estimator `α = f_ML(ρ, x, y)` of Eq. 29 (unfitted; see [`crate::module2::estimator`]).
+/// The estimator `α = f_ML(ρ, x, y)` of Eq. 29 (unfitted; see `estimator`).
 ///
 /// In TOML: `[estimator]` with `kind = "lstm" | "ridge" | "exact_linear"` and the kind's own
 /// keys (for the LSTM every [`seqnet::LstmSettings`] field, missing ones at their defaults).
@@ -349,7 +349,7 @@ pub enum CoefficientMode {
     /// Not in the paper: the coefficient functions integrated out under a Gaussian-process
     /// prior with Module 2's kernels (the Kennedy-O'Hagan treatment), `ρ` integrated over its
     /// uniform prior, `σ_ε` and the prior's amplitude by type-II maximum likelihood; Module 4
-    /// carries `θ`, `ρ` and every coefficient direction (see [`crate::module3::marginal`]).
+    /// carries `θ`, `ρ` and every coefficient direction (see `marginal`).
     /// The default: its intervals are the ones the coverage study checks.
     #[default]
     Marginal,
@@ -370,7 +370,7 @@ pub struct MarginalPrior {
     /// Prior variance of each coefficient function's unknown level, relative to the process
     /// variance (dimensionless, ≥ 0): `α_k(x) = √s a_k(x) (z_k(x) + β_k)`, `β_k ~ N(0, c)`.
     /// `0` (the default, [`DEFAULT_LEVEL_VARIANCE`]) is a zero-mean prior; `1e4` is vague,
-    /// near an unknown flat-prior level (ordinary kriging); see [`crate::module3::marginal`].
+    /// near an unknown flat-prior level (ordinary kriging); see `marginal`.
     ///
     /// ```
     /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = 1e4").unwrap();
@@ -394,7 +394,7 @@ pub struct MarginalPrior {
     /// ```
     pub fixed: Option<FixedHyper>,
     /// Whether the data may say there is no discrepancy at all
-    /// ([`crate::module3::average`]): [`DiscrepancyPresence::Weighed`] (the default) weighs the
+    /// (`average`): [`DiscrepancyPresence::Weighed`] (the default) weighs the
     /// model with the discrepancy against the calibration without one by their evidence and
     /// predicts with the two models' mixture; [`DiscrepancyPresence::Assumed`] keeps the model
     /// with it.
@@ -417,7 +417,7 @@ pub enum DiscrepancyPresence {
     /// always hold a discrepancy drawn from its prior, checks this posterior.
     Assumed,
     /// The models with and without a discrepancy weighed by their evidence, the answer their
-    /// mixture ([`crate::module3::average`]). Needs the no-discrepancy fit
+    /// mixture (`average`). Needs the no-discrepancy fit
     /// ([`CalibrationParams::no_discrepancy_fit`]), a one-dimensional `θ` (a grid posterior
     /// carries its evidence) and no declared build tolerances (the fit without a discrepancy
     /// does not integrate them, so the evidences would not compare the discrepancy alone);
@@ -556,7 +556,7 @@ pub struct CalibrationParams {
     /// The adequacy checks run after Module 3.
     pub adequacy: AdequacyParams,
     /// Fit the strongest calibration without a discrepancy at its `θ` posterior's support
-    /// points ([`crate::module3::no_discrepancy::NoDiscrepancyFit`], "baseline (b)"), which
+    /// points ([`crate::posterior::no_discrepancy::NoDiscrepancyFit`], "baseline (b)"), which
     /// [`crate::Predictor::no_discrepancy_response`] predicts from (default `true`). It costs
     /// the model at every support point of that posterior (up to 400 `θ`s, each at every
     /// experiment); a caller that never predicts the baseline, such as a close loop, turns it

@@ -4,12 +4,15 @@
 #[path = "../../mlmodel/tests/apps/beam_app.rs"]
 mod beam_app;
 
-use bamudi::module2::estimator::{CoefficientEstimator, ExactLinearEstimator};
-use bamudi::module2::training::{self, LinearParts, TrainingSpec, XContext};
-use bamudi::module3::likelihood::{FactoredCovariance, assemble_covariance, iid_log_density};
-use bamudi::module3::mcmc::adaptive_metropolis;
-use bamudi::module3::posterior::GridPosterior;
+use bamudi::internals::ExactLinearEstimator;
+use bamudi::internals::adaptive_metropolis;
+use bamudi::internals::{FactoredCovariance, assemble_covariance, iid_log_density};
+use bamudi::internals::{
+    LinearParts, TrainingSpec, XContext, generate_general, generate_linear, theta_rule,
+};
 use bamudi::observe::Silent;
+use bamudi::posterior::GridPosterior;
+use bamudi::surrogate::CoefficientEstimator;
 use bamudi::{
     CalibrationConfig, CalibrationParams, Experiments, Marginalisation, McmcConfig, SamplingRule,
 };
@@ -89,9 +92,9 @@ fn module3_likelihood_equals_brute_force_dense_evaluation() {
 /// `log_posteriors` gives them one at a time, and `-∞` outside the prior.
 #[test]
 fn batched_module3_nodes_equal_node_by_node_evaluation() {
-    use bamudi::module2::Problem;
-    use bamudi::module3::grid::LogPosteriors;
-    use bamudi::module3::{ThetaLikelihood, ThetaResiduals};
+    use bamudi::internals::LogPosteriors;
+    use bamudi::internals::Problem;
+    use bamudi::internals::{ThetaLikelihood, ThetaResiduals};
     use mlmodel::{ObservableModel, UnobservableModel};
     let model = beam_app::beam_model((5.0, 25.0), 4);
     let (n_e, n_o) = (30, beam_app::GAUGES_IN.len());
@@ -498,7 +501,7 @@ fn config_toml_round_trip_and_named_errors() {
 fn training_set_linear_fast_path_equals_general_path_and_is_deterministic() {
     let model = beam_app::beam_model((5.0, 25.0), 4);
     let parts = LinearParts::new(&model).unwrap();
-    let rule = training::theta_rule(
+    let rule = theta_rule(
         model.prior.as_ref(),
         &Marginalisation::Quadrature { order: 3 },
         0,
@@ -513,8 +516,8 @@ fn training_set_linear_fast_path_equals_general_path_and_is_deterministic() {
         size: 40,
         seed: 9,
     };
-    let fast = training::generate_linear(&model, &parts, &spec, &Silent).unwrap();
-    let slow = training::generate_general(&model, &spec, &Silent).unwrap();
+    let fast = generate_linear(&model, &parts, &spec, &Silent).unwrap();
+    let slow = generate_general(&model, &spec, &Silent).unwrap();
     assert_eq!(fast.len(), 40);
     assert_eq!(fast.pool_size, 10);
     assert_eq!(fast.alpha, slow.alpha);
@@ -522,7 +525,7 @@ fn training_set_linear_fast_path_equals_general_path_and_is_deterministic() {
     let scale = fast.mu_o.amax();
     // A (Σ w g) vs Σ w (A g): summation order only
     assert!((&fast.mu_o - &slow.mu_o).amax() < 1e-9 * scale);
-    let again = training::generate_linear(&model, &parts, &spec, &Silent).unwrap();
+    let again = generate_linear(&model, &parts, &spec, &Silent).unwrap();
     assert_eq!(again.mu_o, fast.mu_o);
     // the sampling rule: |α_k| within c (|s_k| + floor), ρ within its range
     assert!(fast.rho.iter().all(|r| (0.0..=1.2).contains(r)));
@@ -552,7 +555,7 @@ proptest! {
 
 #[test]
 fn gp_posterior_covariance_over_noise_variance_is_the_mean_smoother() {
-    // The conditional coefficient mode (bamudi::module3::conditional) re-conditions the coefficient GPs
+    // The conditional coefficient mode (bamudi::posterior::conditional) re-conditions the coefficient GPs
     // on new targets through S = Σ(X, X) / σ_n² (and S(x*) = Σ(x*, X) / σ_n² at new inputs).
     // Check the identity against the GP's own predictive mean, at the training inputs and at
     // new ones, for a constant-mean GP with estimated noise.
@@ -709,7 +712,7 @@ fn response_moments_are_the_bands_moments() {
 }
 
 /// The evidence weighing of the models with and without a discrepancy
-/// ([`bamudi::module3::average`]) on the beam, marginal mode:
+/// ([`bamudi::posterior`]) on the beam, marginal mode:
 ///
 /// * on strains the model class holds (`ρ A g(θ*) + b + noise`, no discrepancy) it gives the
 ///   model without one the larger weight, and the mixture's `θ` is nearly that model's,
@@ -839,7 +842,7 @@ fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it()
         .unwrap()
         .probability_without;
     assert!(
-        p0 < bamudi::module4::NEGLIGIBLE_MODEL_WEIGHT,
+        p0 < bamudi::predict::NEGLIGIBLE_MODEL_WEIGHT,
         "P(no discrepancy) = {p0}"
     );
     let (p_w, p_a) = (

@@ -37,7 +37,7 @@ mod ssm;
 use super::CalibratedModel;
 use crate::config::TrackConfig;
 use crate::error::{CloseLoopError, Result};
-use bamudi::module3::posterior::ThetaSummary;
+use bamudi::posterior::ThetaSummary;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 

@@ -8,11 +8,12 @@
 //! `β_k ~ N(0, c)` its level, `a(x)` the root mean square of the nominal response
 //! `g(x, θ̄)` at the prior mean `θ̄`, and `s` the amplitude; the discrepancy is `L α(x)` on the
 //! basis supported above the true gap `θ*` and orthonormalised as the calibration's is
-//! ([`bamudi::module3::marginal::orthonormalised`]). It is drawn jointly at every input the
+//! ([`bamudi::internals::orthonormalised`]). It is drawn jointly at every input the
 //! replicate uses (its experiments and its new conditions) and looked up there.
 
 use crate::error::{GateAppError, Result};
-use bamudi::module3::marginal::{CoefficientPrior, orthonormalised};
+use bamudi::internals::orthonormalised;
+use bamudi::posterior::CoefficientPrior;
 use mitergate::{ContactModel, GateMultiLevel};
 use nalgebra::{DMatrix, DVector};
 use rand::SeedableRng;

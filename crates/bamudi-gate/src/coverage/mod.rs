@@ -38,7 +38,7 @@ use crate::baselines::{Baselines, ConditionForces, DeltaScore, ErrorTally, SeenS
 use crate::error::{GateAppError, Result};
 use crate::paper::figures::location_a;
 use crate::paper::{ForceRmse, build_gate, gate_model, prior_mean_response};
-use bamudi::module2::estimator::FittedEstimator;
+use bamudi::surrogate::FittedEstimator;
 use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
 use bamudi::{
     Calibrate, Calibration, CalibrationParams, CoefficientMode, EstimatorParams, MarginalPrior,
@@ -296,7 +296,7 @@ pub struct Replicate {
     #[serde(default)]
     pub hyper: Option<[f64; 3]>,
     /// `P(M_0 | y)`: the posterior probability of no discrepancy, when the models with and
-    /// without one were weighed ([`bamudi::module3::average`]).
+    /// without one were weighed ([`bamudi::posterior`]).
     #[serde(default)]
     pub probability_without: Option<f64>,
     /// The truth's place in more posteriors than `θ`'s ([`Ranks`]; `None` in reports saved

@@ -177,7 +177,7 @@ impl Truth {
 
     /// The truth's identified `ρ⊥` at the experiments `levels`: `Σ aᵀ A F / Σ aᵀa` with
     /// `a = A g(x_i, θ*)` and `F` the true forces, the value a calibration's
-    /// [`bamudi::module3::marginal::MarginalFit::rho_projection`] estimates (noise-free).
+    /// [`bamudi::posterior::MarginalFit::rho_projection`] estimates (noise-free).
     pub fn projection_rho(&self, contact: &ContactModel, levels: &[[f64; 2]]) -> Result<f64> {
         let a_mat = &contact.gate().a_matrix;
         let (mut num, mut den) = (0.0, 0.0);

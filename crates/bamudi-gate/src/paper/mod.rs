@@ -32,7 +32,7 @@ pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rul
 use crate::baselines::Baselines;
 use crate::error::Result;
 use crate::gate::ROW_MEMO_CAPACITY;
-use bamudi::module2::accuracy::{EstimatorAccuracy, estimator_accuracy};
+use bamudi::surrogate::{EstimatorAccuracy, estimator_accuracy};
 use bamudi::{
     Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode, EstimatorParams,
     Experiments, SamplingRule,
@@ -268,7 +268,7 @@ pub struct ScenarioResult {
     /// Our ρ*.
     pub rho_star: f64,
     /// θ posterior of the answer: with the discrepancy model, or the evidence-weighed mixture
-    /// of the models with and without it when they were weighed ([`bamudi::module3::average`]).
+    /// of the models with and without it when they were weighed ([`bamudi::posterior`]).
     pub theta_posterior: ThetaSummary,
     /// θ posterior without it.
     pub theta_posterior_no_discrepancy: ThetaSummary,
@@ -362,8 +362,8 @@ pub struct ReproduceReport {
 /// on the machine's core count or the thread schedule. It differs from the one-shard network by the summation order only, which the
 /// training amplifies: the LSTM-based numbers moved by up to 1.1 % (the conditional mode's
 /// tangential RMSE, scenario 1) and θ by 0.01 in.
-fn bamudi_lstm_paper() -> bamudi::module2::estimator::LstmSettings {
-    bamudi::module2::estimator::LstmSettings {
+fn bamudi_lstm_paper() -> bamudi::surrogate::LstmSettings {
+    bamudi::surrogate::LstmSettings {
         hidden: 64,
         layers: 1,
         steps: 10,

@@ -32,9 +32,9 @@ use super::plot::{
     svg_figure,
 };
 use crate::error::{GateAppError, Result};
-use bamudi::module2::estimator::CoefficientEstimator;
-use bamudi::module3::likelihood::FactorReport;
-use bamudi::module3::posterior::GridPosterior;
+use bamudi::posterior::FactorReport;
+use bamudi::posterior::GridPosterior;
+use bamudi::surrogate::CoefficientEstimator;
 use bamudi::{Calibration, ThetaPosterior, Timings};
 use plotters::prelude::*;
 use serde::Serialize;
@@ -93,7 +93,7 @@ pub struct ReportInputs {
     /// The true gap (in) when the data are synthetic and it is known (drawn in the plots).
     pub theta_true: Option<f64>,
     /// Warnings about the result (e.g. the posterior's, see
-    /// [`bamudi::module3::posterior::GridWarning`]).
+    /// [`bamudi::posterior::GridWarning`]).
     pub warnings: Vec<String>,
 }
 
@@ -114,7 +114,7 @@ pub struct Results {
     /// The declared tolerances of the build with their posteriors, in their standard
     /// deviations (absent when none were declared).
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    tolerances: Vec<bamudi::module3::marginal::ToleranceEstimate>,
+    tolerances: Vec<bamudi::posterior::ToleranceEstimate>,
     /// The adequacy verdict and its checks (absent when disabled).
     #[serde(skip_serializing_if = "Option::is_none")]
     adequacy: Option<bamudi::AdequacyReport>,
@@ -278,7 +278,7 @@ fn zoom_to_peak(pts: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 /// The marginal mode's `ρ` posterior with what its spread does not mean (`rho_curve.svg`
 /// draws it): a `ρ` interval that the coverage study found to miss the simulator's `ρ` is not
 /// offered as a claim.
-fn rho_caveat(m: &bamudi::module3::marginal::MarginalFit) -> String {
+fn rho_caveat(m: &bamudi::posterior::MarginalFit) -> String {
     let [p, p_sd] = m.rho_projection;
     format!(
         "* ρ⊥, the data's scale of the nominal force (the ρ that leaves the discrepancy's \
@@ -292,7 +292,7 @@ fn rho_caveat(m: &bamudi::module3::marginal::MarginalFit) -> String {
 }
 
 /// The marginal mode's `ρ` posterior on 200 points over its mean ± 5 sd (within the prior).
-fn rho_mixture(m: &bamudi::module3::marginal::MarginalFit) -> Vec<(f64, f64)> {
+fn rho_mixture(m: &bamudi::posterior::MarginalFit) -> Vec<(f64, f64)> {
     let lo = (m.rho_mean - 5.0 * m.rho_sd).max(m.rho_prior.0);
     let hi = (m.rho_mean + 5.0 * m.rho_sd).min(m.rho_prior.1);
     let total: f64 = m
@@ -457,7 +457,7 @@ pub(crate) fn inputs_markdown(i: &ReportInputs) -> String {
 }
 
 /// The declared tolerances of the build, integrated out, with their posteriors.
-pub(super) fn tolerances_markdown(tols: &[bamudi::module3::marginal::ToleranceEstimate]) -> String {
+pub(super) fn tolerances_markdown(tols: &[bamudi::posterior::ToleranceEstimate]) -> String {
     tols.iter()
         .map(|t| {
             format!(

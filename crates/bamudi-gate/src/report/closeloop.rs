@@ -6,7 +6,7 @@ use super::plot::{
 };
 use crate::error::{GateAppError, Result};
 use crate::record_fatigue::RecordFatigue;
-use bamudi::module3::marginal::ToleranceEstimate;
+use bamudi::posterior::ToleranceEstimate;
 use bamudi_closeloop::{CloseLoopOutcome, CloseLoopReport};
 use plotters::prelude::*;
 use std::fmt::Write as _;

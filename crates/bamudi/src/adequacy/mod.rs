@@ -2,7 +2,7 @@
 //! (marginal mode), computed from the calibration's own covariance so that what the
 //! discrepancy could absorb is counted, not hidden.
 //!
-//! The checks ([`checks`], over the linear-Gaussian residual model of [`residual`]):
+//! The checks (`checks`, over the linear-Gaussian residual model of `residual`):
 //! * `logo`: each gauge predicted from all the others (leave one gauge out), with `ρ` and `θ`
 //!   re-estimated and the discrepancy conditioned on the other gauges: chi-square over the
 //!   experiments; `ppc_autocorrelation`: Ljung-Box on the same residuals whitened in row order;
@@ -17,7 +17,7 @@
 //! All p-values form one family with Holm's correction at
 //! [`AdequacyParams::family_alpha`]; the verdict is inadequate when any is rejected. Each
 //! failure is attributed ([`Attribution`]); an application adds its own physical checks with
-//! [`Calibration::add_adequacy_checks`]. The identifiability report ([`Identifiability`]) is
+//! [`crate::Calibration::add_adequacy_checks`]. The identifiability report ([`Identifiability`]) is
 //! descriptive. The hyper-parameters (`s`, `σ`, length scales) are plug-ins: a fault inflates
 //! them, which makes the tests conservative rather than alarming.
 //!
@@ -32,9 +32,9 @@ pub use crate::params::AdequacyParams;
 pub use verdict::holm;
 
 use crate::error::{BamudiError, Result};
-use crate::module2::Problem;
-use crate::module3::marginal::MarginalState;
-use crate::module3::{Module3, model_rows};
+use crate::posterior::marginal::MarginalState;
+use crate::posterior::{Module3, model_rows};
+use crate::surrogate::Problem;
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
@@ -89,7 +89,7 @@ impl FaultKind {
     }
 
     /// The name of its check.
-    pub fn check_name(self) -> String {
+    pub(crate) fn check_name(self) -> String {
         format!("sensor_{}", self.name())
     }
 }
@@ -304,8 +304,8 @@ impl AdequacyReport {
     }
 
     /// Adds threshold checks: checks with a pass threshold rather than a p-value (see
-    /// [`Calibration::add_adequacy_checks`]).
-    pub fn add_threshold_checks(&mut self, checks: Vec<(Check, Attribution)>) {
+    /// [`crate::Calibration::add_adequacy_checks`]).
+    pub(crate) fn add_threshold_checks(&mut self, checks: Vec<(Check, Attribution)>) {
         for (c, attribution) in checks {
             if !c.passed {
                 self.failed.push(FailedCheck {
@@ -457,12 +457,12 @@ where
     Ok((rm, lay))
 }
 
-/// One test per declared tolerance of the build ([`crate::module3::marginal::nuisance`]):
+/// One test per declared tolerance of the build ([`crate::posterior::marginal::nuisance`]):
 /// is the deviation the data imply plausible under its prior `N(0, 1)`? Under the model the
 /// posterior mean `m` of a deviation has variance `1 − sd²` (the prior's variance less the
 /// expected posterior variance), so `z = m / √(1 − sd²)` is standard normal; a gate built
 /// outside its declared tolerance fails it (attributed to the model's form).
-fn build_tolerance_checks(tols: &[crate::module3::marginal::ToleranceEstimate]) -> Vec<Check> {
+fn build_tolerance_checks(tols: &[crate::posterior::marginal::ToleranceEstimate]) -> Vec<Check> {
     use statrs::function::erf::erfc;
     tols.iter()
         .map(|t| {
@@ -561,7 +561,7 @@ fn family(gauges: &[GaugeCheck], cond: &ConditionCheck, faults: &[SensorFault]) 
 /// along each seen direction, and the `ρ`-`θ` correlation.
 fn identifiability(
     cal: &Subject<'_>,
-    fit: &crate::module3::marginal::MarginalFit,
+    fit: &crate::posterior::marginal::MarginalFit,
 ) -> Result<Identifiability> {
     let amps = &fit.amplitudes;
     let active: Vec<usize> = (0..amps.nrows())
@@ -606,7 +606,7 @@ fn identifiability(
 }
 
 /// `corr(ρ, θ)` over the stored support points (scalar `θ`).
-fn rho_theta_correlation(fit: &crate::module3::marginal::MarginalFit) -> Option<f64> {
+fn rho_theta_correlation(fit: &crate::posterior::marginal::MarginalFit) -> Option<f64> {
     let nodes = &fit.nodes;
     if nodes.iter().any(|n| n.theta.len() != 1) {
         return None;

@@ -2,8 +2,8 @@
 
 use super::{CoefficientEstimator, EstimatorData, FittedEstimator, stack_inputs};
 use crate::error::{BamudiError, Result};
-use crate::module2::training::{TrainingSet, XContext};
 use crate::observe::{Event, Observer};
+use crate::surrogate::training::{TrainingSet, XContext};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 

@@ -86,7 +86,7 @@ impl CoefficientGps {
     }
 
     /// White-noise variances `σ_2²` of Eq. 35, per coefficient.
-    pub fn noise_variances(&self) -> Vec<f64> {
+    pub(crate) fn noise_variances(&self) -> Vec<f64> {
         self.models
             .iter()
             .map(gp::GpModel::noise_variance)

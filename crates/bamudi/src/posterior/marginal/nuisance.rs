@@ -19,7 +19,7 @@
 
 use super::lowrank::{LowRank, Spectrum};
 use crate::error::{BamudiError, Result};
-use crate::module2::Problem;
+use crate::surrogate::Problem;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use numerics::Cholesky;

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 /// The nodes and weights used to marginalise `θ` (Eq. 25, 27, 31).
 ///
 /// ```
-/// use bamudi::{Marginalisation, module2::training::theta_rule};
+/// use bamudi::{Marginalisation, internals::theta_rule};
 /// let prior = mlmodel::NormalPrior::new(vec![(0.0, 1.0)]).unwrap();
 /// let mc = theta_rule(&prior, &Marginalisation::MonteCarlo { samples: 4 }, 1).unwrap();
 /// assert_eq!(mc.nodes.len(), 4);

@@ -1,35 +1,42 @@
 //! Module 3 of BA-MUDI (paper Sec. 3.4): the posterior of `θ`.
 //!
 //! The likelihood is Eq. 40 over all `N_e x N_o` observations with the analytic covariance of
-//! Eq. 51 ([`likelihood`]); its mean at a candidate `θ` is Eq. 50 with the coefficients the
-//! [`CoefficientStrategy`] of the configured mode gives ([`coefficients`]). One-dimensional `θ`
-//! gets exact grid quadrature, more dimensions adaptive Metropolis ([`grid`], [`mcmc`]); the
+//! Eq. 51 (`likelihood`); its mean at a candidate `θ` is Eq. 50 with the coefficients the
+//! `CoefficientStrategy` of the configured mode gives (`coefficients`). One-dimensional `θ`
+//! gets exact grid quadrature, more dimensions adaptive Metropolis (`grid`, `mcmc`); the
 //! "without discrepancy" posterior (`δ = 0`, `ρ` integrated, `σ_ε` profiled: the strongest
-//! calibration without a discrepancy, [`no_discrepancy`]; Fig. 16) comes with it.
+//! calibration without a discrepancy, `no_discrepancy`; Fig. 16) comes with it.
 
-pub mod average;
-pub mod coefficients;
-pub mod conditional;
-pub mod grid;
-pub mod likelihood;
-pub mod marginal;
-pub mod mcmc;
-pub mod no_discrepancy;
-pub mod posterior;
+pub(crate) mod average;
+pub(crate) mod coefficients;
+pub(crate) mod conditional;
+pub(crate) mod grid;
+pub(crate) mod likelihood;
+pub(crate) mod marginal;
+pub(crate) mod mcmc;
+pub(crate) mod no_discrepancy;
 pub(crate) mod rho;
+pub(crate) mod theta;
+
+pub(crate) mod evaluate;
+
+pub use average::ModelAverage;
+pub use conditional::RhoProfile;
+pub(crate) use evaluate::{ThetaLikelihood, ThetaResiduals};
+pub use likelihood::FactorReport;
+pub use marginal::{CoefficientPrior, MarginalFit, MarginalNode, ToleranceEstimate};
+pub use no_discrepancy::{NoDiscrepancyFit, NoDiscrepancyNode};
+pub use theta::{GridPosterior, GridWarning, SupportPolicy, ThetaPosterior, ThetaSummary};
 
 use crate::error::Result;
-use crate::module2::gps::CoefficientGps;
-use crate::module2::training::XContext;
-use crate::module2::{Module2, Problem};
-use crate::observe::{Observer, Stage, tick};
+use crate::surrogate::gps::CoefficientGps;
+use crate::surrogate::training::XContext;
+use crate::surrogate::{Module2, Problem};
 use coefficients::{CoefficientStrategy, Coefficients};
-use conditional::{ConditionalCoefficients, ModelRows, RhoProfile};
-use likelihood::{FactorReport, FactoredCovariance, assemble_covariance};
+use conditional::{ConditionalCoefficients, ModelRows};
+use likelihood::{FactoredCovariance, assemble_covariance};
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
-use no_discrepancy::NoDiscrepancyFit;
-use posterior::{SupportPolicy, ThetaPosterior};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -45,7 +52,7 @@ pub struct Module3 {
     /// The conditional mode's posterior-averaged GP targets `E_θ[α̂(θ)]` (`N_e x K`).
     pub alpha_hat: Option<DMatrix<f64>>,
     /// The conditional mode's smoother weights (`N_e x K`) of `E_θ[α̂(θ)] − α̂`: the GP mean at
-    /// `x` becomes `μ_k(x) + Σ_k(x, X) w_k` ([`ConditionalCoefficients::weights`]).
+    /// `x` becomes `μ_k(x) + Σ_k(x, X) w_k` (`ConditionalCoefficients::weights`).
     pub alpha_correction: Option<DMatrix<f64>>,
     /// `σ_ε` used (output units).
     pub sigma_eps: f64,
@@ -56,7 +63,7 @@ pub struct Module3 {
     /// Posterior of `θ` with the discrepancy model (Eq. 38-43).
     pub posterior: ThetaPosterior,
     /// Posterior of `θ` without discrepancy (`δ = 0`, `ρ` integrated over its prior, `σ_ε`
-    /// profiled; [`no_discrepancy`]; Fig. 16).
+    /// profiled; `no_discrepancy`; Fig. 16).
     pub posterior_no_discrepancy: ThetaPosterior,
     /// The no-discrepancy calibration at its posterior's support points (`ρ` per point), for
     /// its predictions (baseline (b); `None` when
@@ -69,7 +76,7 @@ pub struct Module3 {
     #[serde(default)]
     pub marginal: Option<marginal::MarginalFit>,
     /// The models with and without a discrepancy weighed by their evidence, for Module 4's
-    /// predictions ([`average`]; `Some` with
+    /// predictions (`average`; `Some` with
     /// [`DiscrepancyPresence::Weighed`](crate::params::DiscrepancyPresence::Weighed) on a grid
     /// posterior in the marginal mode). The gap's posterior stays [`Self::posterior`].
     #[serde(default)]
@@ -87,7 +94,7 @@ impl Module3 {
 /// How Module 3 treats the discrepancy coefficients: through a [`CoefficientStrategy`] on
 /// Module 2's estimates (the paper's mode and the conditional one), or integrated out
 /// ([`marginal`]).
-pub enum Method<U, O> {
+pub(crate) enum Method<U, O> {
     /// Module 2's coefficient GPs, adapted by the strategy.
     Modular(Box<dyn CoefficientStrategy<U, O>>),
     /// The coefficients integrated out under their GP prior.
@@ -95,7 +102,7 @@ pub enum Method<U, O> {
 }
 
 /// The method of a coefficient mode.
-pub fn method<U, O>(mode: crate::params::CoefficientMode) -> Method<U, O>
+pub(crate) fn method<U, O>(mode: crate::params::CoefficientMode) -> Method<U, O>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
@@ -108,7 +115,7 @@ where
 
 /// Module 3, first part: the strategy adapts Module 2's coefficients (the conditional mode's
 /// `ρ` profile search and GP refit).
-pub fn adapt_coefficients<U, O>(
+pub(crate) fn adapt_coefficients<U, O>(
     p: &Problem<'_, U, O>,
     m2: &Module2,
     ctx: &[XContext],
@@ -122,7 +129,7 @@ where
 }
 
 /// Module 3, second part: `σ_ε`, the Eq.-51 covariance and both `θ` posteriors.
-pub fn posterior<U, O>(
+pub(crate) fn posterior<U, O>(
     p: &Problem<'_, U, O>,
     m2: &Module2,
     ctx: &[XContext],
@@ -188,7 +195,7 @@ where
 }
 
 /// `A g_u(x_i, θ)` and `b(x_i, θ)` at every experiment (`N_e x N_o` each; rows in parallel).
-pub fn model_rows<U, O>(p: &Problem<'_, U, O>, theta: &[f64]) -> Result<ModelRows>
+pub(crate) fn model_rows<U, O>(p: &Problem<'_, U, O>, theta: &[f64]) -> Result<ModelRows>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
@@ -203,129 +210,4 @@ where
         ag: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i][q]),
         b: DMatrix::from_fn(n_e, n_o, |i, q| per_row[i][n_o + q]),
     })
-}
-
-/// Residuals of the Module-3 mean (Eq. 50) against the data at a candidate `θ`.
-pub struct ThetaResiduals<'a, 'p, U, O> {
-    /// The problem (model, data, `A`, `L`, `B`).
-    pub p: &'a Problem<'p, U, O>,
-    /// `ρ*`.
-    pub rho: f64,
-    /// `B μ_α(x_i)` per experiment (`N_e x N_o`) from the coefficient GPs.
-    pub shift: DMatrix<f64>,
-    /// The re-estimator of the coefficients at each `θ` (conditional mode), if any.
-    pub conditional: Option<&'a ConditionalCoefficients<'a>>,
-}
-
-impl<U: UnobservableModel, O: LinearObservableModel> ThetaResiduals<'_, '_, U, O> {
-    /// Stacked residuals `y − E_o(θ)` with the discrepancy (Eq. 41/50), and the log likelihood
-    /// without it ([`no_discrepancy`]).
-    pub fn residuals(&self, theta: &[f64]) -> Result<(Vec<f64>, f64)> {
-        let (exps, bm) = (self.p.exps, &self.p.parts.b);
-        let (n_e, n_o) = (exps.len(), exps.y.ncols());
-        let ModelRows { ag, b, .. } = model_rows(self.p, theta)?;
-        let extra = match self.conditional {
-            None => None,
-            Some(c) => Some(c.smooth(&c.delta(self.rho, &ag, &b)?) * bm.transpose()),
-        };
-        let mut with = Vec::with_capacity(n_e * n_o);
-        let (mut a, mut c) = (Vec::with_capacity(n_e * n_o), Vec::with_capacity(n_e * n_o));
-        for i in 0..n_e {
-            for q in 0..n_o {
-                let y = exps.y[(i, q)];
-                let shift = self.shift[(i, q)] + extra.as_ref().map_or(0.0, |e| e[(i, q)]);
-                with.push(y - (self.rho * ag[(i, q)] + b[(i, q)] + shift));
-                a.push(ag[(i, q)]);
-                c.push(y - b[(i, q)]);
-            }
-        }
-        let without =
-            no_discrepancy::fit_at(&a, &c, self.p.cfg.sampling.rho_range, self.p.cfg.sigma_eps)
-                .log_lik;
-        Ok((with, without))
-    }
-
-    /// `E_θ[α̂(θ)] − α̂` over the posterior support ([`SupportPolicy::default`]).
-    fn posterior_mean_delta(
-        &self,
-        cc: &ConditionalCoefficients<'_>,
-        posterior: &ThetaPosterior,
-    ) -> Result<DMatrix<f64>> {
-        let parts = posterior
-            .support(&SupportPolicy::default())
-            .par_iter()
-            .map(|(theta, w)| {
-                let rows = model_rows(self.p, theta)?;
-                Ok(cc.delta(self.rho, &rows.ag, &rows.b)? * *w)
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let zero = DMatrix::zeros(self.p.exps.len(), self.p.parts.b.ncols());
-        Ok(parts.into_iter().fold(zero, |acc, d| acc + d))
-    }
-}
-
-/// Everything the Module-3 log densities need.
-pub struct ThetaLikelihood<'a, 'p, U, O> {
-    /// The residual model.
-    pub res: ThetaResiduals<'a, 'p, U, O>,
-    /// Factored `V`.
-    pub factor: &'a FactoredCovariance,
-}
-
-impl<U: UnobservableModel, O: LinearObservableModel> grid::LogPosteriors
-    for ThetaLikelihood<'_, '_, U, O>
-{
-    /// Unnormalised log posteriors (with, without discrepancy) at `θ`; `-∞` outside the prior.
-    fn log_posteriors(&self, theta: &[f64]) -> Result<(f64, f64)> {
-        let lp = self.res.p.model.prior.ln_pdf(theta);
-        if !lp.is_finite() {
-            return Ok((f64::NEG_INFINITY, f64::NEG_INFINITY));
-        }
-        let (with, without) = self.res.residuals(theta)?;
-        Ok((lp + self.factor.log_density(&with)?, lp + without))
-    }
-
-    /// The residuals of every node in parallel, then one blocked solve with the factor of `V`
-    /// for all of them ([`FactoredCovariance::log_densities`]); the same values as
-    /// [`log_posteriors`](Self::log_posteriors) node by node, up to round-off.
-    fn log_posteriors_at_nodes(
-        &self,
-        nodes: &[f64],
-        observer: &dyn Observer,
-    ) -> Result<Vec<(f64, f64)>> {
-        let per_node = nodes
-            .par_iter()
-            .map(|t| {
-                let lp = self.res.p.model.prior.ln_pdf(&[*t]);
-                let r = if lp.is_finite() {
-                    self.res
-                        .residuals(&[*t])
-                        .map(|(with, without)| Some((lp, with, lp + without)))
-                } else {
-                    Ok(None)
-                };
-                tick(observer, Stage::Module3);
-                r
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let inside: Vec<&(f64, Vec<f64>, f64)> = per_node.iter().flatten().collect();
-        let n_s = self.factor.size();
-        if let Some(node) = inside.iter().find(|node| node.1.len() != n_s) {
-            return Err(crate::error::BamudiError::dim(
-                "residual vs covariance size",
-                n_s,
-                node.1.len(),
-            ));
-        }
-        let stacked = DMatrix::from_fn(n_s, inside.len(), |s, c| inside[c].1[s]);
-        // one value per column of `stacked`, so the iterator below never runs dry
-        let mut with = self.factor.log_densities(&stacked)?.into_iter();
-        Ok(per_node
-            .iter()
-            .map(|node| match node {
-                Some((lp, _, iid)) => (lp + with.next().unwrap_or(f64::NAN), *iid),
-                None => (f64::NEG_INFINITY, f64::NEG_INFINITY),
-            })
-            .collect())
-    }
 }

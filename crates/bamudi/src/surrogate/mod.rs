@@ -1,30 +1,34 @@
 //! Module 2 of BA-MUDI (paper Sec. 3.3): learn the discrepancy coefficients.
 //!
 //! Offline, a training set `(ρ, x, α) ↦ μ_o` with `θ` marginalised over its prior (Eq. 27,
-//! [`training`]) and an estimator `α = f_ML(ρ, x, y)` fitted on it (Eq. 29, [`estimator`]);
-//! online, `ρ*` (Eq. 30-31, [`rho`]), `α̂` at the experiments (Eq. 32) and one GP per
-//! coefficient (Eq. 33-37, [`gps`]). Each step is a function of a [`Problem`]; the executor in
-//! [`crate::calibration`] runs them in order, times them and collects a [`Module2`].
+//! `training`) and an estimator `α = f_ML(ρ, x, y)` fitted on it (Eq. 29, `estimator`);
+//! online, `ρ*` (Eq. 30-31, `rho`), `α̂` at the experiments (Eq. 32) and one GP per
+//! coefficient (Eq. 33-37, `gps`). Each step is a function of a [`Problem`]; the executor in
+//! `calibration` runs them in order, times them and collects a [`Module2`].
 
-pub mod accuracy;
-pub mod estimator;
-pub mod gps;
-pub mod rho;
-pub mod training;
+pub(crate) mod accuracy;
+pub(crate) mod estimator;
+pub(crate) mod gps;
+pub(crate) mod problem;
+pub(crate) mod rho;
+pub(crate) mod training;
+
+pub use accuracy::{EstimatorAccuracy, estimator_accuracy};
+pub use estimator::{CoefficientEstimator, FittedEstimator, LstmSettings};
+pub use gps::CoefficientGps;
+pub(crate) use problem::Problem;
 
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
-use crate::observe::Observer;
 use crate::params::CalibrationConfig;
-use estimator::{CoefficientEstimator, EstimatorData, FitEstimator, FittedEstimator};
-use gps::CoefficientGps;
+use estimator::{EstimatorData, FitEstimator};
 use mlmodel::{LinearObservableModel, MultiLevelModel, QuadratureRule, UnobservableModel};
 use nalgebra::DMatrix;
 use numerics::random::derive_seed;
 use rayon::prelude::*;
 use rho::{RhoCurve, estimate_rho};
 use serde::{Deserialize, Serialize};
-use training::{LinearParts, TrainingSet, TrainingSpec, XContext};
+use training::{TrainingSet, TrainingSpec, XContext};
 
 /// Indices of the seeds derived from the master seed, one per random step (fixed: a
 /// calibration with the same master seed draws the same numbers in every version).
@@ -43,66 +47,6 @@ pub(crate) mod seed_index {
     pub const ESTIMATOR: u64 = 6;
     /// Prior draws standing in for a `θ` grid when `dim θ > 1`.
     pub const THETA_CANDIDATES: u64 = 8;
-}
-
-/// What every step of Modules 2-3 reads: the model, the data, the checked configuration, the
-/// observer, and what is derived from them once (`A`, `L`, `B`; the `θ` rule; the input box).
-pub struct Problem<'a, U, O> {
-    /// The multi-level model.
-    pub model: &'a MultiLevelModel<U, O>,
-    /// The experiments.
-    pub exps: &'a Experiments,
-    /// The checked configuration.
-    pub cfg: &'a CalibrationConfig,
-    /// `A`, `L`, `B = A L`.
-    pub parts: LinearParts,
-    /// Nodes and weights marginalising `θ` (Eq. 25, 27, 31).
-    pub theta_rule: QuadratureRule,
-    /// The box the training inputs are drawn in.
-    pub x_bounds: Vec<(f64, f64)>,
-    /// Receives progress.
-    pub observer: &'a dyn Observer,
-}
-
-impl<'a, U: UnobservableModel, O: LinearObservableModel> Problem<'a, U, O> {
-    /// Checks that the data fit the model and derives the fixed parts.
-    pub fn new(
-        model: &'a MultiLevelModel<U, O>,
-        exps: &'a Experiments,
-        cfg: &'a CalibrationConfig,
-        observer: &'a dyn Observer,
-    ) -> Result<Self> {
-        check_data(model, exps)?;
-        if !model.tolerances.is_empty() && cfg.coefficients != crate::CoefficientMode::Marginal {
-            return Err(BamudiError::InvalidConfig {
-                name: "coefficients",
-                reason: format!(
-                    "the model declares {} observable tolerance(s), which only the marginal mode \
-                     integrates; use coefficients = \"marginal\" or declare none",
-                    model.tolerances.len()
-                ),
-            });
-        }
-        let theta_rule = training::theta_rule(
-            model.prior.as_ref(),
-            &cfg.marginalisation,
-            derive_seed(cfg.seed, seed_index::THETA_RULE),
-        )?;
-        Ok(Self {
-            model,
-            exps,
-            cfg,
-            parts: LinearParts::new(model)?,
-            theta_rule,
-            x_bounds: input_box(cfg, exps),
-            observer,
-        })
-    }
-
-    /// The `i`-th experiment's inputs.
-    pub fn x_row(&self, i: usize) -> Vec<f64> {
-        self.exps.x.row(i).iter().copied().collect()
-    }
 }
 
 /// The result of Module 2.
@@ -125,7 +69,7 @@ pub struct Module2 {
 }
 
 /// The Eq.-27 training set, when the configured estimator needs one.
-pub fn training_set<U, O>(p: &Problem<'_, U, O>) -> Result<Option<TrainingSet>>
+pub(crate) fn training_set<U, O>(p: &Problem<'_, U, O>) -> Result<Option<TrainingSet>>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
@@ -144,7 +88,7 @@ where
 }
 
 /// The configured estimator fitted (Eq. 29).
-pub fn fit_estimator<U, O>(
+pub(crate) fn fit_estimator<U, O>(
     p: &Problem<'_, U, O>,
     training: Option<&TrainingSet>,
 ) -> Result<FittedEstimator> {
@@ -158,7 +102,7 @@ pub fn fit_estimator<U, O>(
 }
 
 /// The prior-averaged contexts (Eq. 31) at every experiment, in parallel.
-pub fn contexts<U, O>(p: &Problem<'_, U, O>) -> Result<Vec<XContext>>
+pub(crate) fn contexts<U, O>(p: &Problem<'_, U, O>) -> Result<Vec<XContext>>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
@@ -173,7 +117,7 @@ where
 }
 
 /// `ρ*` (Eq. 30) and `α̂` at the experiments (Eq. 32).
-pub fn rho_and_alpha<U, O>(
+pub(crate) fn rho_and_alpha<U, O>(
     p: &Problem<'_, U, O>,
     estimator: &FittedEstimator,
     ctx: &[XContext],
@@ -185,7 +129,7 @@ pub fn rho_and_alpha<U, O>(
 }
 
 /// One GP per coefficient fitted to `alpha` (Eq. 33-37), with the configured restarts.
-pub fn coefficient_gps<U, O>(
+pub(crate) fn coefficient_gps<U, O>(
     p: &Problem<'_, U, O>,
     alpha: &DMatrix<f64>,
 ) -> Result<CoefficientGps> {
@@ -193,7 +137,7 @@ pub fn coefficient_gps<U, O>(
     CoefficientGps::fit(&p.exps.x, alpha, p.cfg.gp_restarts, seed)
 }
 
-fn check_data<U: UnobservableModel, O: LinearObservableModel>(
+pub(crate) fn check_data<U: UnobservableModel, O: LinearObservableModel>(
     model: &MultiLevelModel<U, O>,
     exps: &Experiments,
 ) -> Result<()> {
@@ -223,7 +167,7 @@ fn check_data<U: UnobservableModel, O: LinearObservableModel>(
 
 /// The configured input box, or the experiments' bounding box (a constant input is widened
 /// by half its magnitude, at least 0.5, each way).
-fn input_box(cfg: &CalibrationConfig, exps: &Experiments) -> Vec<(f64, f64)> {
+pub(crate) fn input_box(cfg: &CalibrationConfig, exps: &Experiments) -> Vec<(f64, f64)> {
     match &cfg.sampling.x_bounds {
         Some(b) => b.clone(),
         None => exps

@@ -33,9 +33,9 @@ pub use ridge::RidgeEstimator;
 pub use seqnet::LstmSettings;
 
 use crate::error::{BamudiError, Result};
-use crate::module2::training::{LinearParts, TrainingSet, XContext};
 use crate::observe::Observer;
 use crate::params::EstimatorParams;
+use crate::surrogate::training::{LinearParts, TrainingSet, XContext};
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -118,9 +118,9 @@ pub fn stack_inputs(rho: &[f64], x: &DMatrix<f64>, y: &DMatrix<f64>) -> DMatrix<
 pub enum FittedEstimator {
     /// See [`ExactLinearEstimator`].
     ExactLinear(ExactLinearEstimator),
-    /// See [`RidgeEstimator`].
+    /// See `RidgeEstimator`.
     Ridge(RidgeEstimator),
-    /// See [`LstmEstimator`] (boxed: the network is much larger than the other variants).
+    /// See `LstmEstimator` (boxed: the network is much larger than the other variants).
     Lstm(Box<LstmEstimator>),
 }
 

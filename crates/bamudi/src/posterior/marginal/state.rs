@@ -2,7 +2,7 @@
 
 use super::{Covariance, LowRank, MarginalFit, MarginalNode, supported_basis};
 use crate::error::{BamudiError, Result};
-use crate::module2::training::LinearParts;
+use crate::surrogate::training::LinearParts;
 use nalgebra::{DMatrix, DVector};
 
 /// The factored covariance of a marginal-mode calibration and its (supported) basis, rebuilt
@@ -283,7 +283,7 @@ impl MarginalFit {
 
     /// The nodes grouped into at most `max` equal-mass groups of neighbouring `θ` (scalar `θ`;
     /// each group's data mass-weighted), or as stored.
-    pub fn grouped_nodes(&self, max: usize) -> Vec<MarginalNode> {
+    pub(crate) fn grouped_nodes(&self, max: usize) -> Vec<MarginalNode> {
         if self.nodes.len() <= max || self.nodes.first().is_none_or(|n| n.theta.len() != 1) {
             return self.nodes.clone();
         }

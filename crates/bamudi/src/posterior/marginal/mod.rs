@@ -76,20 +76,20 @@ pub mod nuisance;
 mod state;
 
 pub use lowrank::{LowRank, Spectrum};
-pub use state::{CrossCov, MarginalState, NodeTerms};
+pub use state::{MarginalState, NodeTerms};
 
 use super::average::ModelAverage;
 use super::grid::{self, LogPosteriors, coarse_nodes};
 use super::likelihood::FactorReport;
 use super::no_discrepancy::{self, NoDiscrepancyFit};
-use super::posterior::{SupportPolicy, ThetaPosterior};
 use super::rho::{ThetaTerms, truncated_moments};
+use super::theta::{SupportPolicy, ThetaPosterior};
 use super::{Module3, model_rows};
 use crate::error::{BamudiError, Result};
-use crate::module2::training::{LinearParts, XContext};
-use crate::module2::{Module2, Problem};
 use crate::optim::Brent;
 use crate::params::{CoefficientKernel, CoefficientScales, DiscrepancyPresence, MarginalPrior};
+use crate::surrogate::training::{LinearParts, XContext};
+use crate::surrogate::{Module2, Problem};
 use mlmodel::{DiscrepancyBasis, LinearObservableModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use nuisance::Nuisance;
@@ -146,7 +146,7 @@ impl CoefficientPrior {
     }
 
     /// The correlation matrix between the rows of `x1` and `x2` (the level left out).
-    pub fn correlation_matrix(&self, x1: &DMatrix<f64>, x2: &DMatrix<f64>) -> DMatrix<f64> {
+    pub(crate) fn correlation_matrix(&self, x1: &DMatrix<f64>, x2: &DMatrix<f64>) -> DMatrix<f64> {
         let rows = |x: &DMatrix<f64>| -> Vec<Vec<f64>> {
             (0..x.nrows())
                 .map(|i| x.row(i).iter().copied().collect())
@@ -200,7 +200,7 @@ pub struct MarginalFit {
     /// The `θ` posterior's support points with what Module 4 needs at each.
     pub nodes: Vec<MarginalNode>,
     /// The declared tolerances of the system's build, integrated out, with their
-    /// posterior (empty when none were declared; [`nuisance`]).
+    /// posterior (empty when none were declared; `nuisance`).
     #[serde(default)]
     pub tolerances: Vec<ToleranceEstimate>,
     /// Their columns `J` at [`support_theta`](Self::support_theta) (`N_s x P`), kept so that
@@ -234,7 +234,7 @@ pub struct MarginalNode {
     /// Variance of `ρ` given this `θ`.
     pub rho_var: f64,
     /// `c = y − b(θ)` (`N_s`, experiment-major): with `a`, the coefficients' posterior mean
-    /// at any input is `s Cy V⁻¹ (c − ρ a)` ([`MarginalState::coefficient_means`]). The
+    /// at any input is `s Cy V⁻¹ (c − ρ a)` (`MarginalState::coefficient_means`). The
     /// columns themselves are stored, free of any basis; `V⁻¹ c` by Woodbury's subtraction,
     /// stored before, was not accurate enough. Missing in files of older versions (then
     /// empty, and loading says so).
@@ -305,7 +305,7 @@ const GRAM_TOL: f64 = 1e-12;
 /// `L G^{-1/2}` with `G = Lᵀ L / n` (`n` rows): columns orthonormal in the mean over the
 /// response's points, so a unit coefficient is a correction of unit root mean square, and the
 /// symmetric square root keeps each new column as close as possible to the old one (its
-/// polynomial order). Directions with no response ([`GRAM_TOL`]) are zeroed, not inverted.
+/// polynomial order). Directions with no response (`GRAM_TOL`) are zeroed, not inverted.
 pub fn orthonormalised(l: &DMatrix<f64>) -> Result<DMatrix<f64>> {
     let g = l.tr_mul(l) / l.nrows().max(1) as f64;
     let eig = numerics::SymmetricEigen::new(&g, "Gram matrix of the supported basis")?;
@@ -1065,7 +1065,7 @@ where
         return Ok(p.cfg.sampling.noise_sd);
     }
     let (mean, _) = m2.gps.predict(&p.exps.x)?;
-    let pred = crate::module2::rho::predicted_outputs(m2.rho.rho_star, &mean, ctx, &p.parts);
+    let pred = crate::surrogate::rho::predicted_outputs(m2.rho.rho_star, &mean, ctx, &p.parts);
     let y = &p.exps.y;
     let ss: f64 = (y - pred).iter().map(|r| r * r).sum();
     Ok((ss / (y.nrows() * y.ncols()) as f64).sqrt().max(1e-12))
@@ -1387,7 +1387,7 @@ mod tests {
     struct ToleranceSetting {
         fit: MarginalFit,
         state: MarginalState,
-        cross: CrossCov,
+        cross: state::CrossCov,
         xs: [f64; 1],
         ax: [f64; 2],
         prior: CoefficientPrior,

@@ -21,10 +21,10 @@
 //! against it.
 
 use super::model_rows;
-use super::posterior::{SupportPolicy, ThetaPosterior};
 use super::rho::{ThetaTerms, truncated_moments};
+use super::theta::{SupportPolicy, ThetaPosterior};
 use crate::error::Result;
-use crate::module2::Problem;
+use crate::surrogate::Problem;
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -124,7 +124,7 @@ impl NoDiscrepancyFit {
     /// Mean and sd of `ρ` over the mixture of the nodes' conditionals.
     ///
     /// ```
-    /// use bamudi::module3::no_discrepancy::{NoDiscrepancyFit, NoDiscrepancyNode};
+    /// use bamudi::posterior::{NoDiscrepancyFit, NoDiscrepancyNode};
     /// let node = |theta: f64, weight: f64, rho_mean: f64| NoDiscrepancyNode {
     ///     theta: vec![theta], weight, rho_mean, rho_var: 0.0, sigma_eps: 1.0,
     /// };

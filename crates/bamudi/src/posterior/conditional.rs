@@ -16,11 +16,11 @@
 
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
-use crate::module2::estimator::{CoefficientEstimator, FittedEstimator};
-use crate::module2::gps::CoefficientGps;
-use crate::module2::training::XContext;
 use crate::optim::Brent;
 use crate::params::RhoSearch;
+use crate::surrogate::estimator::{CoefficientEstimator, FittedEstimator};
+use crate::surrogate::gps::CoefficientGps;
+use crate::surrogate::training::XContext;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -73,7 +73,7 @@ impl RhoProfile {
     /// stay.
     ///
     /// ```
-    /// # let mut p: bamudi::module3::conditional::RhoProfile = serde_json::from_str(r#"{"rho_star_eq30": 1.0, "rho": [], "rms": [],
+    /// # let mut p: bamudi::posterior::RhoProfile = serde_json::from_str(r#"{"rho_star_eq30": 1.0, "rho": [], "rms": [],
     /// #   "theta_at_min": [], "rho_star": 1.0, "theta_star": [90.0], "rms_at_star": 1.0}"#).unwrap();
     /// p.rms_after_refit = 2.4;
     /// assert!(!p.refit_kept());

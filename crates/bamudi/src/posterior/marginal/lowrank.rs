@@ -38,7 +38,7 @@ impl LowRank {
     }
 
     /// [`new`](Self::new) dropping the eigenvalues below `tol` times the largest.
-    pub fn with_tolerance(
+    pub(crate) fn with_tolerance(
         priors: &[CoefficientPrior],
         x: &DMatrix<f64>,
         amps: &DMatrix<f64>,
@@ -96,7 +96,7 @@ impl LowRank {
     /// `f_jᵀ corr / |f_j|²`), and `level` (`ax √c`) on the level's column when there is one.
     ///
     /// ```
-    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank};
+    /// use bamudi::internals::{CoefficientPrior, LowRank};
     /// use nalgebra::{DMatrix, DVector};
     /// let x = DMatrix::from_fn(6, 1, |i, _| i as f64);
     /// let prior = CoefficientPrior {
@@ -146,12 +146,12 @@ impl LowRank {
     }
 
     /// Number of observations `N_s`.
-    pub fn n_obs(&self) -> usize {
+    pub(crate) fn n_obs(&self) -> usize {
         self.factors.first().map_or(0, DMatrix::nrows) * self.b.nrows()
     }
 
     /// `Wᵀ V` for the columns of `v` (`N_s x c`).
-    pub fn wt(&self, v: &DMatrix<f64>) -> DMatrix<f64> {
+    pub(crate) fn wt(&self, v: &DMatrix<f64>) -> DMatrix<f64> {
         let (n_e, n_o) = (self.factors[0].nrows(), self.b.nrows());
         let mut out = DMatrix::zeros(self.rank(), v.ncols());
         for c in 0..v.ncols() {
@@ -301,7 +301,7 @@ pub const NULL_DIRECTION: f64 = 1e-12;
 /// size, then costs `(R/N_s)³` times more in the primal form.
 ///
 /// ```
-/// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+/// use bamudi::internals::{CoefficientPrior, LowRank, Spectrum};
 /// use nalgebra::DMatrix;
 /// // one rough coefficient function at 8 experiments seen by one gauge: W has 8 + 1 (level)
 /// // columns against 8 observations, so the spectrum is of W Wᵀ
@@ -414,7 +414,7 @@ impl Spectrum {
 
     /// `Z = W Q (I + tΛ)^{-1/2}` (`N_s` rows): `V⁻¹ = σ⁻² (I − t Z Zᵀ)`, whose blocks are
     /// cheap.
-    pub fn whitened_factor(&self, lr: &LowRank, t: f64) -> DMatrix<f64> {
+    pub(crate) fn whitened_factor(&self, lr: &LowRank, t: f64) -> DMatrix<f64> {
         let scale = self.lambda.map(|l| 1.0 / (1.0 + t * l).sqrt());
         match &self.basis {
             Basis::Primal { q, .. } => lr.w(&DMatrix::from_fn(q.nrows(), q.ncols(), |i, j| {
@@ -465,7 +465,7 @@ impl Spectrum {
     /// `(C Cᵀ − t zᵀ(I + tΛ)⁻¹ z) / σ²`, nothing large is subtracted.
     ///
     /// ```
-    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+    /// use bamudi::internals::{CoefficientPrior, LowRank, Spectrum};
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(5, 1, |i, _| i as f64);
     /// let prior = CoefficientPrior {
@@ -515,7 +515,7 @@ impl Spectrum {
     /// lies along those very directions.
     ///
     /// ```
-    /// use bamudi::module3::marginal::{CoefficientPrior, LowRank, Spectrum};
+    /// use bamudi::internals::{CoefficientPrior, LowRank, Spectrum};
     /// use nalgebra::DMatrix;
     /// let x = DMatrix::from_fn(5, 1, |i, _| i as f64);
     /// let prior = CoefficientPrior {
@@ -567,7 +567,13 @@ impl Spectrum {
     }
 
     /// The Gram matrix `Uᵀ V⁻¹ U` from `qwu = Qᵀ Wᵀ U` and `uu = UᵀU`.
-    pub fn gram(&self, qwu: &DMatrix<f64>, uu: &DMatrix<f64>, t: f64, sigma2: f64) -> DMatrix<f64> {
+    pub(crate) fn gram(
+        &self,
+        qwu: &DMatrix<f64>,
+        uu: &DMatrix<f64>,
+        t: f64,
+        sigma2: f64,
+    ) -> DMatrix<f64> {
         (uu - self.core(qwu, qwu, t) * t) / sigma2
     }
 

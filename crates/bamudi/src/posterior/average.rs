@@ -36,7 +36,7 @@
 //! The mixture of the two `θ` posteriors is kept in [`ModelAverage::posterior`] for what it
 //! is: the `θ`s the predictions average over.
 
-use super::posterior::{GridPosterior, ThetaPosterior};
+use super::theta::{GridPosterior, ThetaPosterior};
 use crate::error::Result;
 use serde::{Deserialize, Serialize};
 
@@ -65,8 +65,8 @@ impl ModelAverage {
     /// node where one density is not finite).
     ///
     /// ```
-    /// use bamudi::module3::average::ModelAverage;
-    /// use bamudi::module3::posterior::{GridPosterior, ThetaPosterior};
+    /// use bamudi::posterior::ModelAverage;
+    /// use bamudi::posterior::{GridPosterior, ThetaPosterior};
     /// let theta: Vec<f64> = (0..401).map(|i| -8.0 + 16.0 * i as f64 / 400.0).collect();
     /// let normal = |m: f64, c: f64| -> ThetaPosterior {
     ///     let l = theta.iter().map(|t| c - 0.5 * (t - m) * (t - m)).collect();

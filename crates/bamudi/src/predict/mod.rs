@@ -12,9 +12,9 @@
 //!
 //! with `μ_α`, `Σ_α` the coefficient GPs' latent means and variances (independent GPs, so
 //! `Σ_α` is diagonal), shifted in the conditional mode by the posterior-averaged coefficient
-//! change ([`crate::module3::Module3::alpha_correction`]).
+//! change ([`crate::posterior::Module3::alpha_correction`]).
 //!
-//! With declared build tolerances (marginal mode; [`crate::module3::marginal::nuisance`]) the
+//! With declared build tolerances (marginal mode; `nuisance`) the
 //! deviations `η` enter every prediction as they entered the data: each component's mean gains
 //! `J(x) η̂` (outputs) or `R(x) η̂` (response, `R = ρ (g⁺ − g⁻) / 2`), its variance
 //! `diag(J M⁻¹ Jᵀ) + 2 diag(B C Jᵀ)` (with `L`, `R` for the response), `M⁻¹ = Var(η | y)` and
@@ -29,9 +29,9 @@ pub use draws::{DrawPaths, ResponseDraw, empirical_band};
 
 use crate::calibration::Calibration;
 use crate::error::{BamudiError, Result};
-use crate::module3::marginal::nuisance::{ToleranceColumns, columns_at};
-use crate::module3::marginal::{MarginalFit, MarginalNode, MarginalState, NodeTerms};
-use crate::module3::posterior::SupportPolicy;
+use crate::posterior::marginal::nuisance::{ToleranceColumns, columns_at};
+use crate::posterior::marginal::{MarginalFit, MarginalNode, MarginalState, NodeTerms};
+use crate::posterior::theta::SupportPolicy;
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -172,7 +172,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// `N x K` matrices; the marginal mode's means are averaged over the `θ` posterior), zero
     /// at rows where the response vanishes. The discrepancy model's, also when the two models
     /// were weighed ([`Self::discrepancy`] is the weighed correction).
-    pub fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
+    pub(crate) fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
         self.check_x(x.ncols())?;
         let (mut mean, mut var) = match &self.marginal {
             None => self.cal.alpha_moments(x)?,
@@ -191,7 +191,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// The corrected distributed response at `x` (Eq. 52; component blocked, length `C N_u`).
     ///
     /// When the models with and without a discrepancy were weighed
-    /// ([`crate::module3::average`]), the band is their mixture: this calibration's components
+    /// (`average`), the band is their mixture: this calibration's components
     /// with weight `P(M_1 | y)`, the no-discrepancy fit's with `P(M_0 | y)`.
     pub fn response(&self, x: &[f64]) -> Result<Band> {
         let (comps, w) = self.response_mixture(x)?;
@@ -237,7 +237,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     }
 
     /// `P(M_0 | y)`, the weight of the calibration without a discrepancy in this predictor's
-    /// mixtures ([`crate::module3::average`]): `0` unless the two models were weighed, and
+    /// mixtures (`average`): `0` unless the two models were weighed, and
     /// below [`NEGLIGIBLE_MODEL_WEIGHT`].
     pub fn probability_without(&self) -> f64 {
         match &self.cal.module3().averaged {
@@ -346,7 +346,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     /// The strongest prediction without a discrepancy at `x`: `ρ g_u(x, θ)` mixed over the
     /// no-discrepancy calibration's `θ` posterior with `ρ`'s conditional moments at each point
-    /// ([`crate::module3::no_discrepancy`]; baseline (b) of every before/after). An error for
+    /// (`no_discrepancy`; baseline (b) of every before/after). An error for
     /// a calibration saved before that fit was kept.
     pub fn no_discrepancy_response(&self, x: &[f64]) -> Result<Band> {
         self.check_x(x.len())?;
@@ -375,7 +375,9 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     }
 
     /// The no-discrepancy fit's points (an error for a calibration saved without it).
-    fn no_discrepancy_nodes(&self) -> Result<&[crate::module3::no_discrepancy::NoDiscrepancyNode]> {
+    fn no_discrepancy_nodes(
+        &self,
+    ) -> Result<&[crate::posterior::no_discrepancy::NoDiscrepancyNode]> {
         self.cal
             .module3()
             .no_discrepancy
@@ -610,14 +612,14 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             return Ok(vec![0.0; fit.priors.len()]);
         }
         let (cal, m2) = (self.cal, self.cal.module2());
-        let ctx = crate::module2::training::x_context(
+        let ctx = crate::surrogate::training::x_context(
             self.model,
             cal.parts(),
             &m2.theta_rule,
             &cal.config().sampling,
             x,
         )?;
-        Ok(crate::module3::marginal::prior_scales(
+        Ok(crate::posterior::marginal::prior_scales(
             &ctx,
             &self.model.basis,
             cal.config().marginal.scales,

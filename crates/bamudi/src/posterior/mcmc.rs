@@ -106,7 +106,7 @@ fn run_chain<F: Fn(&[f64]) -> Result<f64>>(
 /// `logp` returns `-∞` outside the support; an `Err` from it stops the run and is returned.
 ///
 /// ```
-/// use bamudi::{McmcConfig, module3::mcmc::adaptive_metropolis};
+/// use bamudi::{McmcConfig, internals::adaptive_metropolis};
 /// let cfg = McmcConfig { chains: 2, warmup: 500, samples: 2000 };
 /// let res = adaptive_metropolis(|t: &[f64]| Ok(-0.5 * t[0] * t[0]), &[vec![-1.0], vec![1.0]], &[0.5], &cfg, 3).unwrap();
 /// assert!(res.mean[0].abs() < 0.2 && res.rhat[0] < 1.05);
@@ -203,7 +203,7 @@ fn w_and_var_plus(chains: &[&[f64]]) -> (f64, f64) {
 /// // two identical-looking stationary chains: R-hat close to one
 /// let a: Vec<f64> = (0..1000).map(|i| ((i * 7919) % 1000) as f64).collect();
 /// let b: Vec<f64> = (0..1000).map(|i| ((i * 104729) % 1000) as f64).collect();
-/// assert!(bamudi::module3::mcmc::split_rhat(&[a, b]) < 1.01);
+/// assert!(bamudi::internals::split_rhat(&[a, b]) < 1.01);
 /// ```
 pub fn split_rhat(chains: &[Vec<f64>]) -> f64 {
     let half = chains.iter().map(Vec::len).min().unwrap_or(0) / 2;
@@ -230,7 +230,7 @@ pub fn split_rhat(chains: &[Vec<f64>]) -> f64 {
 /// let mut u = || { s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407); (s >> 11) as f64 / (1u64 << 53) as f64 };
 /// let a: Vec<f64> = (0..2000).map(|_| u()).collect();
 /// let b: Vec<f64> = (0..2000).map(|_| u()).collect();
-/// let ess = bamudi::module3::mcmc::effective_sample_size(&[a, b]);
+/// let ess = bamudi::internals::effective_sample_size(&[a, b]);
 /// assert!(ess > 3000.0 && ess < 5000.0, "{ess}");
 /// ```
 pub fn effective_sample_size(chains: &[Vec<f64>]) -> f64 {

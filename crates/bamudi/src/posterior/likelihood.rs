@@ -136,7 +136,7 @@ impl FactoredCovariance {
     /// the one-by-one values up to round-off.
     ///
     /// ```
-    /// use bamudi::module3::likelihood::FactoredCovariance;
+    /// use bamudi::internals::FactoredCovariance;
     /// use nalgebra::DMatrix;
     /// let v = DMatrix::from_row_slice(2, 2, &[4.0, 2.0, 2.0, 3.0]);
     /// let f = FactoredCovariance::new(&v, "V").unwrap();

@@ -43,7 +43,7 @@ impl ThetaPosterior {
     /// This is the probability integral transform a coverage study ranks the truth by.
     ///
     /// ```
-    /// use bamudi::module3::posterior::{GridPosterior, ThetaPosterior};
+    /// use bamudi::posterior::{GridPosterior, ThetaPosterior};
     /// let post = ThetaPosterior::Grid(GridPosterior::new(vec![0.0, 1.0, 2.0], vec![0.0; 3]).unwrap());
     /// assert_eq!(post.cdf(0, 1.0), 0.5);
     /// assert_eq!((post.cdf(0, -1.0), post.cdf(0, 3.0)), (0.0, 1.0));
@@ -129,7 +129,7 @@ impl ThetaPosterior {
 /// lower `max_nodes`.
 ///
 /// ```
-/// use bamudi::module3::posterior::{GridPosterior, SupportPolicy, ThetaPosterior};
+/// use bamudi::posterior::{GridPosterior, SupportPolicy, ThetaPosterior};
 /// let theta: Vec<f64> = (0..201).map(|i| 89.5 + 0.005 * i as f64).collect();
 /// let logp = theta.iter().map(|t| -0.5 * ((t - 90.0) / 0.05f64).powi(2)).collect();
 /// let post = ThetaPosterior::Grid(GridPosterior::new(theta, logp).unwrap());
@@ -233,7 +233,7 @@ impl GridPosterior {
     /// Normalises `log_density` on `theta` (increasing, at least 3 nodes).
     ///
     /// ```
-    /// use bamudi::module3::posterior::GridPosterior;
+    /// use bamudi::posterior::GridPosterior;
     /// let theta: Vec<f64> = (0..401).map(|i| -8.0 + 16.0 * i as f64 / 400.0).collect();
     /// let logp: Vec<f64> = theta.iter().map(|t| -0.5 * (t - 1.0) * (t - 1.0)).collect();
     /// let post = GridPosterior::new(theta, logp).unwrap();
@@ -318,7 +318,7 @@ impl GridPosterior {
     /// (e.g. readings with two channels relabelled) compare by it.
     ///
     /// ```
-    /// use bamudi::module3::posterior::GridPosterior;
+    /// use bamudi::posterior::GridPosterior;
     /// let theta: Vec<f64> = (0..801).map(|i| -8.0 + 16.0 * i as f64 / 800.0).collect();
     /// let c = 2.5; // ln of the normal density's integral is 0: the evidence is c
     /// let logp = theta.iter().map(|t| c - 0.5 * t * t - 0.5 * (2.0 * std::f64::consts::PI).ln());
@@ -371,7 +371,7 @@ impl GridPosterior {
     /// more than 1 (bounding the overshoot of a quadratic across a kink).
     ///
     /// ```
-    /// use bamudi::module3::posterior::GridPosterior;
+    /// use bamudi::posterior::GridPosterior;
     /// // a unit Gaussian seen at a spacing of 1.3 sd
     /// let theta: Vec<f64> = (0..13).map(|i| -7.8 + 1.3 * i as f64).collect();
     /// let logp: Vec<f64> = theta.iter().map(|t| -0.5 * (t - 0.3) * (t - 0.3)).collect();
@@ -436,7 +436,7 @@ impl GridPosterior {
     /// Probability masses of the nodes (trapezoid weights times density), summing to one.
     ///
     /// ```
-    /// use bamudi::module3::posterior::GridPosterior;
+    /// use bamudi::posterior::GridPosterior;
     /// let post = GridPosterior::new(vec![0.0, 1.0, 2.0], vec![0.0, 0.0, 0.0]).unwrap();
     /// assert_eq!(post.masses(), vec![0.25, 0.5, 0.25]);
     /// ```
@@ -466,7 +466,7 @@ impl GridPosterior {
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum GridWarning {
     /// The posterior density at a bound of the prior is more than
-    /// [`BOUND_DENSITY_FRACTION`] of its peak: the prior cuts the posterior off, the data may
+    /// `BOUND_DENSITY_FRACTION` of its peak: the prior cuts the posterior off, the data may
     /// favour a `θ` outside the prior, and the bound then decides the answer.
     AtPriorBound {
         /// The bound.
@@ -477,7 +477,7 @@ pub enum GridWarning {
         /// Density at the bound over the peak density.
         density_ratio: f64,
     },
-    /// The 95 % interval spans fewer than [`MIN_RESOLVED_SPACINGS`] evaluated node spacings
+    /// The 95 % interval spans fewer than `MIN_RESOLVED_SPACINGS` evaluated node spacings
     /// (the widest one overlapping it):
     /// the posterior's shape between nodes is the interpolant's assumption (a quadratic log
     /// density), not a computed value.
@@ -531,12 +531,12 @@ impl std::fmt::Display for GridWarning {
 
 impl GridPosterior {
     /// The warnings of this posterior given the prior's bounds: a density at a bound (the
-    /// grid's end nodes, when they are the bounds) above [`BOUND_DENSITY_FRACTION`] of the
-    /// peak, or a 95 % interval narrower than [`MIN_RESOLVED_SPACINGS`] times the widest
+    /// grid's end nodes, when they are the bounds) above `BOUND_DENSITY_FRACTION` of the
+    /// peak, or a 95 % interval narrower than `MIN_RESOLVED_SPACINGS` times the widest
     /// spacing of the [`evaluated`](Self::evaluated) nodes that overlaps it.
     ///
     /// ```
-    /// use bamudi::module3::posterior::{GridPosterior, GridWarning};
+    /// use bamudi::posterior::{GridPosterior, GridWarning};
     /// let theta: Vec<f64> = (0..41).map(|i| i as f64).collect();
     /// let narrow: Vec<f64> = theta.iter().map(|t| -0.5 * ((t - 20.0) / 0.3f64).powi(2)).collect();
     /// let w = GridPosterior::new(theta.clone(), narrow).unwrap().warnings((0.0, 40.0));

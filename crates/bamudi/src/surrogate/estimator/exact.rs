@@ -2,15 +2,16 @@
 
 use super::{CoefficientEstimator, EstimatorData, FittedEstimator};
 use crate::error::{BamudiError, Result};
-use crate::module2::training::{LinearParts, XContext};
+use crate::surrogate::training::{LinearParts, XContext};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 /// The exact linear-Gaussian conditional-mean estimator (see the module docs).
 ///
 /// ```
-/// use bamudi::module2::estimator::{CoefficientEstimator, ExactLinearEstimator};
-/// use bamudi::module2::training::XContext;
+/// use bamudi::internals::ExactLinearEstimator;
+/// use bamudi::surrogate::CoefficientEstimator;
+/// use bamudi::internals::XContext;
 /// use nalgebra::DMatrix;
 /// // one output, one coefficient, B = [2]: y = 2 α  =>  α̂ = y / 2 when noise-free
 /// let est = ExactLinearEstimator::new(DMatrix::from_element(1, 1, 2.0), 0.0).unwrap();
@@ -37,7 +38,7 @@ impl ExactLinearEstimator {
     }
 
     /// From the linear parts of a model.
-    pub fn from_parts(parts: &LinearParts, noise_sd: f64) -> Result<Self> {
+    pub(crate) fn from_parts(parts: &LinearParts, noise_sd: f64) -> Result<Self> {
         Self::new(parts.b.clone(), noise_sd)
     }
 
@@ -45,7 +46,7 @@ impl ExactLinearEstimator {
     /// `r = y − ρ A ḡ − b̄` (the formula of the module docs).
     ///
     /// ```
-    /// use bamudi::module2::estimator::ExactLinearEstimator;
+    /// use bamudi::internals::ExactLinearEstimator;
     /// use nalgebra::{DMatrix, DVector};
     /// let est = ExactLinearEstimator::new(DMatrix::identity(2, 2), 1.0).unwrap();
     /// // prior variance 1, noise variance 1: posterior mean = half the residual

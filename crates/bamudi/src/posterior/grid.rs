@@ -3,11 +3,11 @@
 //! Metropolis otherwise.
 
 use super::mcmc::adaptive_metropolis;
-use super::posterior::{GridPosterior, ThetaPosterior};
+use super::theta::{GridPosterior, ThetaPosterior};
 use crate::error::Result;
-use crate::module2::seed_index;
 use crate::observe::{Event, Observer, Stage, tick};
 use crate::params::CalibrationConfig;
+use crate::surrogate::seed_index;
 use numerics::random::derive_seed;
 use rayon::prelude::*;
 
@@ -23,7 +23,7 @@ pub trait LogPosteriors: Sync {
     /// Eq. 51) overrides it to batch the work on that factor.
     ///
     /// ```
-    /// use bamudi::module3::grid::LogPosteriors;
+    /// use bamudi::internals::LogPosteriors;
     /// struct Normal; // a N(0, 1) posterior with and without discrepancy
     /// impl LogPosteriors for Normal {
     ///     fn log_posteriors(&self, t: &[f64]) -> bamudi::Result<(f64, f64)> {

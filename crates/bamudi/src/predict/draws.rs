@@ -14,7 +14,7 @@
 //! band is the draws' empirical 2.5 % and 97.5 % quantiles. Draws are seeded: the same seed
 //! gives the same band.
 //!
-//! When the models with and without a discrepancy were weighed ([`crate::module3::average`]),
+//! When the models with and without a discrepancy were weighed ([`crate::posterior::average`]),
 //! a draw first picks the model without one with its posterior probability
 //! ([`Predictor::probability_without`]), then a point of that calibration's `θ` posterior by
 //! its weight, and is `ρ g_u(x, θ_j) + L z` with `ρ` from its Gaussian given `θ_j` and `z`

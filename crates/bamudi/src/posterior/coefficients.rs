@@ -7,11 +7,11 @@ use super::conditional::{ConditionalCoefficients, GpMoments, ModelRows, RhoProfi
 use super::grid::coarse_nodes;
 use super::model_rows;
 use crate::error::{BamudiError, Result};
-use crate::module2::gps::CoefficientGps;
-use crate::module2::rho::predicted_outputs;
-use crate::module2::training::XContext;
-use crate::module2::{Module2, Problem, coefficient_gps, seed_index};
 use crate::params::CoefficientMode;
+use crate::surrogate::gps::CoefficientGps;
+use crate::surrogate::rho::predicted_outputs;
+use crate::surrogate::training::XContext;
+use crate::surrogate::{Module2, Problem, coefficient_gps, seed_index};
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
 use numerics::random::derive_seed;
