@@ -79,6 +79,10 @@ pub struct PanelArgs {
     /// Clean records (no effect) for the false-finding count.
     #[arg(long, default_value_t = 20)]
     clean: u64,
+    /// Seed of the first clean record (the design's are 2000-2019; another range is a
+    /// held-out set of clean records).
+    #[arg(long, default_value_t = 2000)]
+    first_clean_seed: u64,
     /// Mesh element size (in).
     #[arg(long, default_value_t = 24.0)]
     mesh: f64,
@@ -148,7 +152,10 @@ pub fn run(args: &PanelArgs) -> Result<()> {
     let progress = args.json.with_extension("jsonl");
     let mut done = read_progress(&progress)?;
     let mut plan: Vec<(String, String, String, u64)> = (0..args.clean)
-        .map(|c| ("clean".into(), "none".into(), "none".into(), 2000 + c))
+        .map(|c| {
+            let seed = args.first_clean_seed + c;
+            ("clean".into(), "none".into(), "none".into(), seed)
+        })
         .collect();
     for kind in &kinds {
         for magnitude in args.magnitudes.split(',') {
