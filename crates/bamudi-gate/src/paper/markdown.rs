@@ -8,7 +8,7 @@ use super::{
 use crate::baselines::{Baselines, NormalTangential};
 use crate::error::{GateAppError, Result};
 use bamudi::EstimatorParams;
-use bamudi_closeloop::ThetaSummary;
+use bamudi::ThetaSummary;
 
 /// Printed above the conditional-mode table.
 pub(super) const CONDITIONAL_NOTE: &str = "\n## Module 3 with the coefficients conditioned on θ (not in the paper)\n\n\

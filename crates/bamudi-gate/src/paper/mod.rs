@@ -32,12 +32,12 @@ pub use sensitivity::{SENSITIVITY_EXPERIMENTS, SENSITIVITY_GRID, sensitivity_rul
 use crate::baselines::Baselines;
 use crate::error::Result;
 use crate::gate::ROW_MEMO_CAPACITY;
+use bamudi::ThetaSummary;
 use bamudi::surrogate::{EstimatorAccuracy, estimator_accuracy};
 use bamudi::{
     Calibrate, Calibration, CalibrationConfig, CalibrationParams, CoefficientMode, EstimatorParams,
     Experiments, SamplingRule,
 };
-use bamudi_closeloop::ThetaSummary;
 use mitergate::data::truth::{self, Scenario};
 use mitergate::{ContactModel, GateConfig, GateMultiLevel, MultiLevelSpec};
 use nalgebra::{DMatrix, DVector};
