@@ -541,6 +541,30 @@ pub(super) struct PostPass {
     pub onset_effects: usize,
 }
 
+impl PostPass {
+    /// The fitted values its residual is taken from (the corrected readings less it).
+    pub(super) fn fitted(&self) -> DMatrix<f64> {
+        &self.y - &self.residual
+    }
+
+    /// Its residual as a scan's input, `fitted` being [`Self::fitted`]: findings may start
+    /// only after the calibration window.
+    pub(super) fn scan_input<'a>(
+        &'a self,
+        lp: &'a Loop<'_>,
+        rec: &'a MeasuredRecord,
+        fitted: &'a DMatrix<f64>,
+    ) -> ScanInput<'a> {
+        ScanInput {
+            rec,
+            residual: &self.residual,
+            fitted,
+            unit: &lp.cfg.output_unit,
+            earliest: cal_end(lp),
+        }
+    }
+}
+
 /// The scan, the track, and the sensor findings after selection: each change of level on one
 /// gauge alone after the calibration window, and the parameter's change alarm, is tested
 /// structure against sensor ([`sensor::attribute`]); a sensor verdict becomes a correction, and
@@ -700,14 +724,8 @@ fn scan_alarm_findings(
     let Some(events) = &post.events else {
         return (vec![], vec![]);
     };
-    let fitted = &post.y - &post.residual;
-    let inp = ScanInput {
-        rec,
-        residual: &post.residual,
-        fitted: &fitted,
-        unit: &lp.cfg.output_unit,
-        earliest: cal_end(lp),
-    };
+    let fitted = post.fitted();
+    let inp = post.scan_input(lp, rec, &fitted);
     let n_cal = cal_end(lp);
     let mut out: Vec<SensorFinding> = vec![];
     let mut tests = vec![];
@@ -788,14 +806,8 @@ fn gain_findings(
     added: &[SensorFinding],
     sens: &DMatrix<f64>,
 ) -> (Vec<SensorFinding>, Vec<AttributionTest>) {
-    let fitted = &post.y - &post.residual;
-    let inp = ScanInput {
-        rec,
-        residual: &post.residual,
-        fitted: &fitted,
-        unit: &lp.cfg.output_unit,
-        earliest: cal_end(lp),
-    };
+    let fitted = post.fitted();
+    let inp = post.scan_input(lp, rec, &fitted);
     let skip: Vec<usize> = post
         .findings
         .iter()
@@ -826,7 +838,7 @@ fn apply_more(
     added: &mut Vec<SensorFinding>,
 ) -> Result<()> {
     post.findings.append(added);
-    let fill = &post.y - &post.residual;
+    let fill = post.fitted();
     let (y, mask) = sensor::apply(&post.findings, &rec.y, &fill, &rec.time_h, None);
     let lp2 = lp.with_y(&y);
     let (mut residual, effects) = match post.st.effects.is_empty() {
@@ -917,7 +929,7 @@ pub(super) fn propagate(
     // two streams: the bootstrap's draws do not depend on how many corrections there are
     let mut rng = StdRng::seed_from_u64(cfg.seed);
     let mut sizes = StdRng::seed_from_u64(cfg.seed.wrapping_add(1));
-    let fitted = &post.y - &post.residual;
+    let fitted = post.fitted();
     let cal = lp.cal;
     let block = 24.min(cal.len());
     let mut dev2 = 0.0;
@@ -984,7 +996,7 @@ pub(super) fn out_of_sample(
         .filter(|f| f.from_row < n_sel)
         .cloned()
         .collect();
-    let mut fitted = &post.y - &post.residual;
+    let mut fitted = post.fitted();
     if post.onset_effects > 0 {
         let c = lp.with_y(&post.y).contributions(&post.st)?;
         for term in &c[c.len() - post.onset_effects..] {

@@ -37,7 +37,7 @@ use crate::effect::{Effect, EffectKind, FitContext, Fitted, Term, param};
 use crate::error::Result;
 use crate::record::MeasuredRecord;
 use crate::search::Loop;
-use crate::sensor::{self, ScanInput};
+use crate::sensor;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -253,14 +253,8 @@ fn test_onset(
     effects: &[&Arc<dyn Effect>],
     (from, day, gauges): (usize, f64, Vec<String>),
 ) -> Result<(OnsetTest, Option<Fitted>)> {
-    let fitted = &post.y - &post.residual;
-    let inp = ScanInput {
-        rec,
-        residual: &post.residual,
-        fitted: &fitted,
-        unit: &lp.cfg.output_unit,
-        earliest: super::cal_end(lp),
-    };
+    let fitted = post.fitted();
+    let inp = post.scan_input(lp, rec, &fitted);
     let (test, _) = sensor::attribute("onset", &inp, sens, from);
     let ln = (((rec.len() - from) * rec.y.ncols()) as f64).ln();
     let structure = test.structure + ln + 2.0 * 2f64.ln();
