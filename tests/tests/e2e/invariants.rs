@@ -623,8 +623,9 @@ fn top_level_imports(krate: &str) -> BTreeMap<String, BTreeSet<String>> {
     graph
 }
 
-/// The cycles of a graph: its strongly connected components of more than one node (Tarjan's
-/// algorithm written as repeated reachability, enough for a few dozen modules).
+/// The cycles of a graph: its strongly connected components of more than one node (each
+/// node's reachable set intersected with the nodes that reach it: quadratic, enough for a few
+/// dozen modules).
 fn cycles(graph: &BTreeMap<String, BTreeSet<String>>) -> Vec<BTreeSet<String>> {
     let reach = |from: &String| {
         let (mut seen, mut todo) = (BTreeSet::new(), vec![from.clone()]);
