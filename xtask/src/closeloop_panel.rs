@@ -34,6 +34,7 @@ use bamudi_gate::gate;
 use mitergate::ContactModel;
 use mitergate::GateConfig;
 use mitergate::data::field::FieldConfig;
+use nalgebra::DMatrix;
 use serde_json::json;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -58,6 +59,9 @@ pub const KINDS: [&str; 12] = [
 /// The sizes written by the kinds a sensor finding sizes, small / medium / large: a gain change
 /// (fraction), an offset step (microstrain), a drift (microstrain per day).
 const SIZES: [[f64; 3]; 3] = [[0.02, 0.05, 0.10], [3.0, 8.0, 20.0], [0.05, 0.15, 0.4]];
+
+/// The noise sd ratios of a noise increase, small / medium / large.
+const NOISE_RATIOS: [f64; 3] = [2.0, 3.0, 5.0];
 
 #[derive(clap::Args)]
 pub struct PanelArgs {
@@ -122,6 +126,55 @@ struct Score {
     size_held: Option<bool>,
     /// Which corrections `rmse_ratio` was fitted with on the test rows too ([`test_rmse`]).
     in_sample: InSample,
+    /// What an oracle could detect in the record ([`Oracle`]); `None` on a clean record.
+    oracle: Option<Oracle>,
+}
+
+/// What an oracle that knows the written effect's shape, gauges and onset could detect in a
+/// record: the best any method could do with these readings. `lambda` is the noncentrality of
+/// its test of one size: the written change's sum of squares over the noise variance (for a
+/// noise increase by `r` on `m` rows, twice the expected log likelihood ratio of the variance
+/// change, `m (r² − 1 − ln r²)`); `power` is the test's power at the 1 % level (χ²₁ with
+/// noncentrality `lambda` above its 99 % quantile). It is an upper bound: nothing of the effect
+/// is absorbed by the calibration's discrepancy, and nothing is searched for (the loop chooses
+/// among kinds, gauges and onsets and pays for it).
+#[derive(Clone, Copy)]
+struct Oracle {
+    lambda: f64,
+    power: f64,
+}
+
+/// The 99 % quantile of χ² with one degree of freedom: the oracle's test level.
+const ORACLE_CHI2_99: f64 = 6.634_896_601;
+
+/// Power at least this the oracle detects the record's effect reliably (the panel's summary).
+const ORACLE_RELIABLE: f64 = 0.9;
+
+impl Oracle {
+    /// From the readings before (`y0`) and after (`y1`) the effect was written, the noise sd,
+    /// and for a noise increase its sd ratio and first row.
+    fn new(
+        kind: &str,
+        y0: &DMatrix<f64>,
+        y1: &DMatrix<f64>,
+        noise: f64,
+        noise_increase: Option<(f64, usize)>,
+    ) -> Self {
+        let lambda = match (kind, noise_increase) {
+            ("noise", Some((r, first))) => {
+                let (m, r2) = ((y0.nrows() - first) as f64, r * r);
+                m * (r2 - 1.0 - r2.ln())
+            }
+            _ => (y1 - y0).iter().map(|d| d * d).sum::<f64>() / (noise * noise),
+        };
+        // P(|Z + √λ| > √c), Z standard normal
+        let (c, l) = (ORACLE_CHI2_99.sqrt(), lambda.sqrt());
+        let phi = |z: f64| 0.5 * statrs::function::erf::erfc(-z / std::f64::consts::SQRT_2);
+        Oracle {
+            lambda,
+            power: phi(-c - l) + 1.0 - phi(c - l),
+        }
+    }
 }
 
 /// What the scored test error was fitted on ([`test_rmse`]).
@@ -176,6 +229,14 @@ pub fn run(args: &PanelArgs) -> Result<()> {
     for (kind, magnitude, onset, seed) in &plan {
         let key = record_key(kind, magnitude, onset, *seed, args);
         let j = match done.remove(&key) {
+            // a record run before the oracle was scored: the record is simulated again (no
+            // loop) for it, and the line appended again with it (the last line of a key wins)
+            Some(mut j) if j.get("oracle").is_none() => {
+                let p = prepare(args, &contact, kind, magnitude, onset, *seed)?;
+                j["oracle"] = oracle_json(p.oracle);
+                append_line(&progress, &j)?;
+                j
+            }
             Some(j) => j,
             None => {
                 let (_, mut j) = one(args, &contact, kind, magnitude, onset, *seed)?;
@@ -187,6 +248,16 @@ pub fn run(args: &PanelArgs) -> Result<()> {
         scores.push(score_of(&j)?);
         records.push(j);
     }
+    // the progress file rewritten with one line per record (a record scored again was appended
+    // again): the records of other plans first, by key, then this plan's
+    let mut others: Vec<serde_json::Value> = done.into_values().collect();
+    others.sort_by(|a, b| a["key"].as_str().cmp(&b["key"].as_str()));
+    let mut lines = String::new();
+    for j in others.iter().chain(&records) {
+        lines += &serde_json::to_string(j)?;
+        lines.push('\n');
+    }
+    write_atomic(&progress, lines.as_bytes())?;
     let md = table(&scores, args);
     if let Some(p) = args.out.parent() {
         std::fs::create_dir_all(p)?;
@@ -279,6 +350,10 @@ fn score_of(j: &serde_json::Value) -> Result<Score> {
         wall_s: f("wall_time_s")?,
         named: s("named")?,
         size_held: size_held(j),
+        oracle: j["oracle"]["lambda"]
+            .as_f64()
+            .zip(j["oracle"]["power_at_1_percent"].as_f64())
+            .map(|(lambda, power)| Oracle { lambda, power }),
         in_sample: if j["parameter_correction"]["fitted_on_error_rows"].as_bool() == Some(true) {
             InSample::Gap
         } else if j["sensor"]["fitted_on_test_rows"].as_bool() == Some(true) {
@@ -436,7 +511,7 @@ fn inject(
             }
         }
         "noise" => {
-            let ratio: f64 = [2.0, 3.0, 5.0][magnitude];
+            let ratio = NOISE_RATIOS[magnitude];
             let extra = (ratio * ratio - 1.0).sqrt();
             for i in first..n {
                 rec.y[(i, gs[0])] += extra * normal();
@@ -519,6 +594,47 @@ fn strain(contact: &ContactModel, hu: f64, hd: f64, gap: f64) -> Result<Vec<f64>
         .to_vec())
 }
 
+/// One record before the loop: simulated, its effect written in.
+struct Prepared {
+    rec: MeasuredRecord,
+    calibrator: GateCalibrator,
+    noise: f64,
+    gap_end: f64,
+    /// `None` on a clean record.
+    oracle: Option<Oracle>,
+}
+
+/// Simulates a record and writes its effect in ([`inject`]).
+fn prepare(
+    args: &PanelArgs,
+    contact: &ContactModel,
+    kind: &str,
+    magnitude: &str,
+    onset: &str,
+    seed: u64,
+) -> Result<Prepared> {
+    let fc = FieldConfig::default()
+        .seed(seed)
+        .duration(60.0, args.step_minutes);
+    let field = gate::simulate_field(&fc, contact)?;
+    let calibrator = GateCalibrator::new(contact.clone(), (60.0, 150.0))?;
+    let mut rec = gate::as_measured(&field, calibrator.model(), "panel.csv")?;
+    let y0 = rec.y.clone();
+    let (level, onset) = (level(magnitude)?, onset_day(onset)?);
+    let gap_end = inject(&mut rec, contact, kind, level, onset, seed)?;
+    let noise = fc.noise_sd_microstrain;
+    let first = rec.time_h.iter().position(|t| t / 24.0 >= onset);
+    let increase = first.map(|f| (NOISE_RATIOS[level], f));
+    let oracle = (kind != "clean").then(|| Oracle::new(kind, &y0, &rec.y, noise, increase));
+    Ok(Prepared {
+        rec,
+        calibrator,
+        noise,
+        gap_end,
+        oracle,
+    })
+}
+
 /// One record: simulate, inject, run the loop, score.
 fn one(
     args: &PanelArgs,
@@ -528,20 +644,13 @@ fn one(
     onset: &str,
     seed: u64,
 ) -> Result<(Score, serde_json::Value)> {
-    let fc = FieldConfig::default()
-        .seed(seed)
-        .duration(60.0, args.step_minutes);
-    let field = gate::simulate_field(&fc, contact)?;
-    let calibrator = GateCalibrator::new(contact.clone(), (60.0, 150.0))?;
-    let mut rec = gate::as_measured(&field, calibrator.model(), "panel.csv")?;
-    let gap_end = inject(
-        &mut rec,
-        contact,
-        kind,
-        level(magnitude)?,
-        onset_day(onset)?,
-        seed,
-    )?;
+    let Prepared {
+        rec,
+        calibrator,
+        noise,
+        gap_end,
+        oracle,
+    } = prepare(args, contact, kind, magnitude, onset, seed)?;
     let mut cfg = gate::close_loop_config(CloseLoopConfig::default(), &rec);
     if let Some(d) = args.draws {
         cfg.sensor.uncertainty_draws = d;
@@ -555,7 +664,6 @@ fn one(
         let path = dir.join(format!("{kind}-{magnitude}-{onset}-{seed}.json"));
         write_atomic(&path, serde_json::to_string_pretty(r)?.as_bytes())?;
     }
-    let noise = fc.noise_sd_microstrain;
     let score = score(r, kind, magnitude, onset, seed, gap_end, noise, wall_s);
     eprintln!(
         "{kind} {magnitude} {onset} seed {seed}: cause {} ({}), rmse/noise {:.2}, gap {:.2} ± {:.2} (truth {gap_end}), {wall_s:.0} s",
@@ -571,8 +679,17 @@ fn one(
         "effects": r.effects.iter().map(|e| (e.name.clone(), e.covariates.clone())).collect::<Vec<_>>(),
         "sensor": r.sensor, "alarms": r.alarms, "conclusion": r.conclusion,
         "parameter_correction": r.parameter_correction, "onset_effects": r.onset,
+        "oracle": oracle_json(oracle),
     });
     Ok((score, j))
+}
+
+/// A record's oracle in its JSON line (`null` on a clean record).
+fn oracle_json(o: Option<Oracle>) -> serde_json::Value {
+    o.map_or(
+        serde_json::Value::Null,
+        |o| json!({"lambda": o.lambda, "power_at_1_percent": o.power}),
+    )
 }
 
 /// What the loop named: its effects, sensor findings and alarms, in one line.
@@ -674,6 +791,7 @@ fn score(
         // read from the record's JSON line (`score_of`), like every score the table shows
         size_held: None,
         in_sample: InSample::No,
+        oracle: None,
     }
 }
 
@@ -734,12 +852,12 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
     );
     let _ = writeln!(
         s,
-        "| kind | magnitude | onset | seed | cause named | what the loop named | fitted size's 95 % holds the size written | test RMSE / noise | gap 95 % holds the truth | gap alarm on a sensor fault | wall time (s) |\n|---|---|---|---|---|---|---|---|---|---|---|"
+        "| kind | magnitude | onset | seed | cause named | what the loop named | fitted size's 95 % holds the size written | test RMSE / noise | gap 95 % holds the truth | gap alarm on a sensor fault | oracle's z = √λ | wall time (s) |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for x in scores {
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {:.0} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {:.0} |",
             x.kind,
             x.magnitude,
             x.onset,
@@ -750,6 +868,8 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
             x.rmse_ratio,
             yes(x.covered),
             yes(x.gap_alarm),
+            x.oracle
+                .map_or("–".into(), |o| format!("{:.0}", o.lambda.sqrt())),
             x.wall_s
         );
     }
@@ -800,6 +920,27 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
         passed.len(),
         sensor + gap + onset
     );
+    let (seen, unseen): (Vec<&Score>, Vec<&Score>) = effect
+        .iter()
+        .partition(|x| x.oracle.is_some_and(|o| o.power >= ORACLE_RELIABLE));
+    let named = |v: &[&Score]| v.iter().filter(|x| x.cause).count();
+    let (lo, hi) = wilson(named(&seen), seen.len());
+    let _ = writeln!(
+        s,
+        "\nAn oracle that knows each effect's shape, gauges and onset (the best any method could \
+         do with these readings: nothing absorbed by the calibration, nothing searched for) \
+         detects it at the 1 % level with power ≥ {ORACLE_RELIABLE} in {} of the {n} records. \
+         The loop names the right cause in {} of those {} (Wilson 95 %: {:.0} – {:.0} %), and in \
+         {} of the {} the oracle does not detect reliably. The table's `oracle's z` is the square \
+         root of its noncentrality λ: the effect's size in noise sds, as an oracle reads it.",
+        seen.len(),
+        named(&seen),
+        seen.len(),
+        100.0 * lo,
+        100.0 * hi,
+        named(&unseen),
+        unseen.len()
+    );
     let sized: Vec<bool> = effect.iter().filter_map(|x| x.size_held).collect();
     let (k, m) = (sized.iter().filter(|b| **b).count(), sized.len());
     let (lo, hi) = wilson(k, m);
@@ -825,4 +966,225 @@ fn table(scores: &[Score], args: &PanelArgs) -> String {
 
 fn yes(b: bool) -> &'static str {
     if b { "yes" } else { "no" }
+}
+
+#[derive(clap::Args)]
+pub struct SummaryArgs {
+    /// The panels' JSON files (`closeloop-panel --json`), comma separated: one column each.
+    #[arg(long, value_delimiter = ',', required = true)]
+    json: Vec<PathBuf>,
+    /// Markdown summary.
+    #[arg(long, default_value = "docs/results/closeloop-panel-summary.md")]
+    out: PathBuf,
+}
+
+/// One panel's records, read back for the summary.
+struct Panel {
+    label: String,
+    scores: Vec<Score>,
+    /// Per record: the test error out of sample within 1.5x the noise, and its alarms.
+    extra: Vec<(bool, usize)>,
+}
+
+/// `cargo xtask closeloop-panel-summary`: several panels (one seed each) side by side and
+/// pooled, with Wilson 95 % intervals of the pooled proportions, and the pooled counts by kind
+/// and by kind and magnitude.
+pub fn summary(args: &SummaryArgs) -> Result<()> {
+    let mut panels = vec![];
+    for path in &args.json {
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+        let records: Vec<serde_json::Value> = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a panel's JSON", path.display()))?;
+        let mut scores = vec![];
+        let mut extra = vec![];
+        for (k, j) in records.iter().enumerate() {
+            scores.push(score_of(j).with_context(|| format!("{} record {k}", path.display()))?);
+            let oos = j["rmse_ratio_out_of_sample"].as_f64().unwrap_or(f64::NAN) <= 1.5;
+            extra.push((oos, j["alarms"].as_array().map_or(0, Vec::len)));
+        }
+        let seeds: std::collections::BTreeSet<u64> = scores
+            .iter()
+            .filter(|x| x.kind != "clean")
+            .map(|x| x.seed)
+            .collect();
+        let label = match (seeds.first(), seeds.last()) {
+            (Some(a), Some(b)) if a == b => format!("seed {a}"),
+            (Some(a), Some(b)) => format!("seeds {a}-{b}"),
+            _ => path.display().to_string(),
+        };
+        panels.push(Panel {
+            label,
+            scores,
+            extra,
+        });
+    }
+    let md = summary_table(&panels);
+    if let Some(p) = args.out.parent() {
+        std::fs::create_dir_all(p)?;
+    }
+    write_atomic(&args.out, md.as_bytes())?;
+    println!("{md}");
+    Ok(())
+}
+
+fn summary_table(panels: &[Panel]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Close-loop panels side by side and pooled; `cargo xtask closeloop-panel-summary{}`. Each \
+         column is one panel (its records' seed); the last pools them, with the Wilson 95 % \
+         interval of the proportion. Within a panel the base record is the same in every cell, \
+         and for `exchange`, `stuck` and `dead` the three magnitudes are one record: the records \
+         are not independent, and the intervals are narrower than the panel's information.\n",
+        std::env::args()
+            .skip(2)
+            .map(|a| format!(" {a}"))
+            .collect::<String>()
+    );
+    let head: Vec<&str> = panels.iter().map(|p| p.label.as_str()).collect();
+    let _ = writeln!(
+        s,
+        "| criterion | {} | all |\n|---|{}---|",
+        head.join(" | "),
+        "---|".repeat(panels.len())
+    );
+    // a row: per panel the count among the panel's records `among`, pooled with its interval
+    let row = |s: &mut String,
+               name: &str,
+               among: &dyn Fn(&Score) -> bool,
+               hit: &dyn Fn(&Score, (bool, usize)) -> bool| {
+        let (mut k_all, mut n_all) = (0, 0);
+        let mut cells = vec![];
+        for p in panels {
+            let (mut k, mut n) = (0, 0);
+            for (x, e) in p.scores.iter().zip(&p.extra) {
+                if among(x) {
+                    n += 1;
+                    k += usize::from(hit(x, *e));
+                }
+            }
+            cells.push(format!("{k} of {n}"));
+            k_all += k;
+            n_all += n;
+        }
+        let (lo, hi) = wilson(k_all, n_all);
+        let _ = writeln!(
+            s,
+            "| {name} | {} | {k_all} of {n_all} ({:.0} – {:.0} %) |",
+            cells.join(" | "),
+            (100.0 * lo).max(0.0),
+            100.0 * hi
+        );
+    };
+    let effect = |x: &Score| x.kind != "clean";
+    let sensor = |x: &Score| KINDS[..7].contains(&x.kind.as_str());
+    row(&mut s, "right cause named", &effect, &|x, _| x.cause);
+    row(&mut s, "test RMSE ≤ 1.5x noise", &effect, &|x, _| {
+        x.rmse_ratio <= 1.5
+    });
+    row(
+        &mut s,
+        "the same, out of sample (no correction fitted on the test rows)",
+        &effect,
+        &|_, e| e.0,
+    );
+    row(
+        &mut s,
+        "gap's 95 % interval holds the truth",
+        &effect,
+        &|x, _| x.covered,
+    );
+    row(&mut s, "all three", &effect, &|x, _| {
+        x.cause && x.rmse_ratio <= 1.5 && x.covered
+    });
+    row(
+        &mut s,
+        "a sized finding's 95 % interval holds the size written",
+        &|x| x.size_held.is_some(),
+        &|x, _| x.size_held == Some(true),
+    );
+    row(
+        &mut s,
+        "an oracle detects the effect (power ≥ 0.9 at the 1 % level)",
+        &effect,
+        &|x, _| x.oracle.is_some_and(|o| o.power >= ORACLE_RELIABLE),
+    );
+    row(
+        &mut s,
+        "gap alarm on a sensor-only record",
+        &sensor,
+        &|x, _| x.gap_alarm,
+    );
+    row(
+        &mut s,
+        "finding on a clean record",
+        &|x| x.kind == "clean",
+        &|x, _| x.false_finding,
+    );
+    let alarms: Vec<String> = panels
+        .iter()
+        .map(|p| p.extra.iter().map(|e| e.1).sum::<usize>().to_string())
+        .collect();
+    let total: usize = panels.iter().flat_map(|p| &p.extra).map(|e| e.1).sum();
+    let _ = writeln!(
+        s,
+        "| alarms over the records | {} | {total} |",
+        alarms.join(" | ")
+    );
+    let wall = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        format!(
+            "{:.0} / {:.0} s",
+            v.get(v.len() / 2).copied().unwrap_or(f64::NAN),
+            v.last().copied().unwrap_or(f64::NAN)
+        )
+    };
+    let walls: Vec<String> = panels
+        .iter()
+        .map(|p| wall(&mut p.scores.iter().map(|x| x.wall_s).collect()))
+        .collect();
+    let mut all: Vec<f64> = panels
+        .iter()
+        .flat_map(|p| p.scores.iter().map(|x| x.wall_s))
+        .collect();
+    let _ = writeln!(
+        s,
+        "| median / slowest wall time per record | {} | {} |",
+        walls.join(" | "),
+        wall(&mut all)
+    );
+    // pooled by kind, and the cause by kind and magnitude
+    let _ = writeln!(
+        s,
+        "\nPooled by kind: records, right cause named, test RMSE ≤ 1.5x noise, gap's interval \
+         holds the truth; and the cause named by magnitude.\n\n| kind | records | cause named | \
+         error ≤ 1.5x | gap holds | cause: small | medium | large |\n|---|---|---|---|---|---|---|---|"
+    );
+    for kind in KINDS {
+        let of: Vec<&Score> = panels
+            .iter()
+            .flat_map(|p| &p.scores)
+            .filter(|x| x.kind == kind)
+            .collect();
+        if of.is_empty() {
+            continue;
+        }
+        let count = |f: &dyn Fn(&Score) -> bool| of.iter().filter(|x| f(x)).count();
+        let by = |m: &str| {
+            let n = count(&|x| x.magnitude == m);
+            format!("{} of {n}", count(&|x| x.magnitude == m && x.cause))
+        };
+        let _ = writeln!(
+            s,
+            "| {kind} | {} | {} | {} | {} | {} | {} | {} |",
+            of.len(),
+            count(&|x| x.cause),
+            count(&|x| x.rmse_ratio <= 1.5),
+            count(&|x| x.covered),
+            by("small"),
+            by("medium"),
+            by("large")
+        );
+    }
+    s
 }

@@ -21,6 +21,8 @@
 //!   [--clean N] [--mesh IN] [--step-minutes M] [--draws N] [--out PATH] [--json PATH]`: the
 //!   close loop on records with undeclared effects and on clean records; writes
 //!   `docs/results/closeloop-panel.md` and `.json`.
+//! * `closeloop-panel-summary --json A,B,... [--out PATH]`: several panels side by side and
+//!   pooled (`docs/results/closeloop-panel-summary.md`).
 
 mod adequacy;
 mod bench;
@@ -62,6 +64,9 @@ enum Task {
     /// The close loop on records with effects nobody declared (sensor, structural,
     /// operational, environmental), and on clean records; writes a markdown table and JSON.
     CloseloopPanel(closeloop_panel::PanelArgs),
+    /// Several close-loop panels (one seed each) side by side and pooled, with Wilson
+    /// intervals and counts by kind and magnitude.
+    CloseloopPanelSummary(closeloop_panel::SummaryArgs),
     /// Cross-check the gate FE model against CalculiX (`ccx` must be installed).
     CalculixCheck {
         /// Mesh element size (in); the default 12 in mesh takes minutes in ccx.
@@ -118,6 +123,7 @@ fn main() -> Result<()> {
         Task::Adequacy(args) => adequacy::run(&args),
         Task::Bench(args) => bench::run(&args),
         Task::CloseloopPanel(args) => closeloop_panel::run(&args),
+        Task::CloseloopPanelSummary(args) => closeloop_panel::summary(&args),
         Task::CalculixCheck {
             element_size,
             dir,

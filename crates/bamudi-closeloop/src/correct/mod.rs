@@ -97,12 +97,7 @@ struct Tests<'a> {
 
 impl Tests<'_> {
     /// [`confirm`] on `st`'s residual (`inp`).
-    fn confirm(
-        &mut self,
-        st: &State,
-        inp: &ScanInput<'_>,
-        f: &SensorFinding,
-    ) -> Result<(Option<SensorFinding>, bool)> {
+    fn confirm(&mut self, st: &State, inp: &ScanInput<'_>, f: &SensorFinding) -> Result<Confirmed> {
         let s = &mut self.sens[usize::from(!std::ptr::eq(st, self.first))];
         if s.is_none() {
             *s = Some(sensor::sensitivity(st.model.as_ref(), self.x)?);
@@ -117,8 +112,10 @@ impl Tests<'_> {
 }
 
 /// Channel exchanges on the first calibration's residual (`inp`), added to `found`: those from
-/// an onset to the end that the structure-or-sensor test confirms, then an exchange seen
-/// before its day, decided by re-calibration ([`relabel`]), whose calibration is returned.
+/// an onset to the end that the structure-or-sensor test confirms, or, from inside the
+/// calibration window, that win the re-calibration against the test's own hypothesis
+/// ([`contest`]); then an exchange seen before its day, decided by re-calibration
+/// ([`relabel`]). The calibration of the last one decided by re-calibration is returned.
 fn exchanges(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
@@ -127,13 +124,37 @@ fn exchanges(
     found: &mut Vec<SensorFinding>,
 ) -> Result<Option<Relabelled>> {
     let (cfg, first) = (&lp.cfg.sensor, tests.first);
+    let mut contested = vec![];
     for e in sensor::exchange_scan(inp, cfg) {
         if e.gauge_columns.iter().any(|&g| taken(found, g)) {
             continue;
         }
-        if let (Some(e), _) = tests.confirm(first, inp, &e)? {
-            found.push(e);
+        let test = tests.confirm(first, inp, &e)?;
+        let inside = e.from_row < cal_end(lp);
+        match (test.agreed(&e), test.best) {
+            (Some(e), _) => found.push(e),
+            (None, Some(rival)) if inside && test.sensor => contested.push((e, rival)),
+            _ => {}
         }
+    }
+    let mut decided = None;
+    for (e, rival) in contested {
+        if e.gauge_columns.iter().any(|&g| taken(found, g)) {
+            continue;
+        }
+        if let Some((e, st)) = contest(lp, rec, first, found, e, rival)? {
+            found.push(e);
+            decided = Some(st);
+        }
+    }
+    // an exchange the test confirmed from inside the calibration window: the first calibration
+    // was fitted to its exchanged days there, and the scans after it would read what that
+    // calibration absorbed as other gauges' gain changes (FE gate, g2<->g5 from day 30, seed
+    // 10: gains on three other gauges), so they read a calibration on the relabelled readings
+    let inside =
+        |f: &SensorFinding| f.kind == SensorKind::ChannelExchange && f.from_row < cal_end(lp);
+    if decided.is_none() && found.iter().any(inside) {
+        decided = Some(recalibrate(lp, rec, first, found, None)?.1);
     }
     // an exchange the first calibration learnt shows before its day: the strongest few pairs
     // whose change the structure-or-sensor test calls a sensor's (any sensor hypothesis: a
@@ -146,17 +167,20 @@ fn exchanges(
         if e.gauge_columns.iter().any(|&g| taken(found, g)) {
             continue;
         }
-        if tests.confirm(first, inp, &e)?.1 {
+        if tests.confirm(first, inp, &e)?.sensor {
             before.push(e);
         }
     }
     if before.is_empty() {
-        return Ok(None);
+        return Ok(decided);
     }
-    Ok(relabel(lp, rec, first, found, before)?.map(|(e, st)| {
-        found.push(e);
-        st
-    }))
+    Ok(match relabel(lp, rec, first, found, before)? {
+        Some((e, st)) => {
+            found.push(e);
+            Some(st)
+        }
+        None => decided,
+    })
 }
 
 /// The scans after the exchanges, on calibration `st`'s residual (`inp`), added to `found`:
@@ -201,7 +225,7 @@ fn later_scans(
         .collect();
     let mut gains = vec![];
     for cand in sensor::gain_scan(&inp, cfg, &skip) {
-        if let (Some(f), _) = tests.confirm(st, &inp, &cand)? {
+        if let Some(f) = tests.confirm(st, &inp, &cand)?.agreed(&cand) {
             gains.push(f);
         }
     }
@@ -210,15 +234,31 @@ fn later_scans(
     Ok(coincident)
 }
 
-/// The structure-or-sensor test of finding `f` over its span (`sens`: the model's sensitivity):
-/// the finding as the test re-dated it, when the test's own best sensor hypothesis is this
-/// finding, and whether the test's verdict is a sensor's (any hypothesis).
+/// What the structure-or-sensor test of a finding said ([`confirm`]).
+struct Confirmed {
+    /// The test's own best sensor hypothesis as it dated it, when its verdict is a sensor's.
+    best: Option<SensorFinding>,
+    /// Whether the verdict is a sensor's (any hypothesis).
+    sensor: bool,
+}
+
+impl Confirmed {
+    /// The test's finding when its best hypothesis is `f`'s (same kind, same gauges).
+    fn agreed(&self, f: &SensorFinding) -> Option<SensorFinding> {
+        self.best
+            .as_ref()
+            .filter(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns)
+            .cloned()
+    }
+}
+
+/// The structure-or-sensor test of finding `f` over its span (`sens`: the model's sensitivity).
 fn confirm(
     inp: &ScanInput<'_>,
     sens: &DMatrix<f64>,
     f: &SensorFinding,
     tests: &mut Vec<AttributionTest>,
-) -> (Option<SensorFinding>, bool) {
+) -> Confirmed {
     let span = (f.from_row, f.to_row.min(inp.residual.nrows()));
     let mut subject = format!("{} {}", f.gauges.join("<->"), f.kind.name());
     if span.1 < inp.residual.nrows() {
@@ -228,8 +268,10 @@ fn confirm(
     log::info!("{subject} from day {:.2}: {}", f.from_day, test.verdict);
     let sensor = test.verdict == "sensor";
     tests.push(test);
-    let found = found.filter(|x| x.kind == f.kind && x.gauge_columns == f.gauge_columns);
-    (found, sensor)
+    Confirmed {
+        best: found,
+        sensor,
+    }
 }
 
 /// Most candidate exchanges found before their day that [`relabel`] re-calibrates (two
@@ -256,19 +298,7 @@ fn relabel(
 ) -> Result<Option<(SensorFinding, Relabelled)>> {
     let n = lp.y.nrows();
     let day = |i: usize| rec.time_h[i] / 24.0;
-    let calibrate = |extra: Option<&SensorFinding>| -> Result<(f64, Relabelled)> {
-        let all: Vec<SensorFinding> = found.iter().chain(extra).cloned().collect();
-        let y = sensor::apply(&all, lp.y, &first.mean, &rec.time_h, None).0;
-        let (model, mean, var) = lp.with_y(&y).calibrate(&y)?;
-        let state = State {
-            model,
-            mean,
-            var,
-            effects: vec![],
-            from_fold: vec![],
-        };
-        Ok((evidence(lp, &state, &y), Relabelled { state, y }))
-    };
+    let calibrate = |extra: Option<&SensorFinding>| recalibrate(lp, rec, first, found, extra);
     // the baseline: the same readings and fills without the relabelling (the set-aside cells'
     // fill alone would otherwise count as the relabelling's evidence)
     let baseline = match found.is_empty() {
@@ -327,6 +357,110 @@ fn relabel(
         "an exchange seen before its day (put right then, or learnt by the first calibration from then on): re-calibrated with each candidate relabelling, log evidence {} against {baseline:.1} without (margin {margin:.1}); the largest, {z:.1}, kept",
         words.join(", ")
     );
+    Ok(Some((f, st)))
+}
+
+/// A calibration on the readings with the pass's findings `found` and `extra` applied, and its
+/// log evidence as a density of the readings as recorded ([`evidence`] plus
+/// [`sensor::log_jacobian`]), by which two corrections of the same readings compare.
+fn recalibrate(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    first: &State,
+    found: &[SensorFinding],
+    extra: Option<&SensorFinding>,
+) -> Result<(f64, Relabelled)> {
+    let all: Vec<SensorFinding> = found.iter().chain(extra).cloned().collect();
+    let y = sensor::apply(&all, lp.y, &first.mean, &rec.time_h, None).0;
+    let (model, mean, var) = lp.with_y(&y).calibrate(&y)?;
+    let state = State {
+        model,
+        mean,
+        var,
+        effects: vec![],
+        from_fold: vec![],
+    };
+    let z = evidence(lp, &state, &y) + sensor::log_jacobian(&all, lp.fit_rows);
+    Ok((z, Relabelled { state, y }))
+}
+
+/// An exchange the scan found from a day inside the calibration window to the end, for which
+/// the structure-or-sensor test preferred another sensor hypothesis (`rival`, such as one
+/// gauge's gain change). The test scores the exchange by swapping the readings back against
+/// the first calibration, which was fitted to the window's exchanged days and absorbed part of
+/// them, while the rival fits a free size to what is left: on panel seed 1002 an exchange from
+/// day 30 (window to day 36) was corrected as a gain of -0.48 on one gauge, and the gap came
+/// out 60.5 ± 5.1 in for a true 90. So both are decided by re-calibration, each with its
+/// correction applied ([`recalibrate`]; the exchange re-dated without the fit's map of the
+/// pair, [`sensor::exchange_onset`]): the exchange is kept, with its calibration, when its log
+/// evidence beats both the rival's and that of the readings with neither by more than `ln 2`
+/// (a Bayes factor above the prior odds of one of the two). `None` otherwise: the rival is
+/// left to the later scans, which find it again on the first calibration's residual.
+fn contest(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    first: &State,
+    found: &[SensorFinding],
+    exchange: SensorFinding,
+    rival: SensorFinding,
+) -> Result<Option<(SensorFinding, Relabelled)>> {
+    let n = lp.y.nrows();
+    let pair = (exchange.gauge_columns[0], exchange.gauge_columns[1]);
+    let min_span = lp.cfg.sensor.min_span_rows;
+    let tau =
+        sensor::exchange_onset(lp.y, &first.mean, pair, min_span).unwrap_or(exchange.from_row);
+    let exchange = SensorFinding {
+        from_row: tau,
+        from_day: rec.time_h[tau] / 24.0,
+        to_row: n,
+        to_day: rec.time_h[n - 1] / 24.0,
+        ..exchange
+    };
+    let baseline = match found.is_empty() {
+        true => evidence(lp, first, lp.y),
+        false => recalibrate(lp, rec, first, found, None)?.0,
+    };
+    // a hypothesis the calibration cannot fit is not a candidate (the loop goes on)
+    let fit = |f: &SensorFinding| match recalibrate(lp, rec, first, found, Some(f)) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            log::warn!("{}: calibration failed, not a candidate: {e}", f.describe());
+            None
+        }
+    };
+    let Some((z, st)) = fit(&exchange) else {
+        return Ok(None);
+    };
+    let z_rival = fit(&rival).map_or(f64::NEG_INFINITY, |c| c.0);
+    let margin = 2f64.ln();
+    let what = |f: &SensorFinding| {
+        let size = f
+            .size
+            .map_or(String::new(), |k| format!(" {k:+.3} {}", f.unit));
+        format!(
+            "{} {}{size} from day {:.2}",
+            f.gauges.join("<->"),
+            f.kind.name(),
+            f.from_day
+        )
+    };
+    log::info!(
+        "{} against {}: log evidence {z:.1} against {z_rival:.1} ({baseline:.1} with neither)",
+        what(&exchange),
+        what(&rival)
+    );
+    if z - z_rival.max(baseline) <= margin {
+        return Ok(None);
+    }
+    let evidence = format!(
+        "the structure-or-sensor test preferred {} against the first calibration, which the window's exchanged days had entered; re-calibrated with each applied, log evidence {z:.1} for the exchange against {z_rival:.1} and {baseline:.1} with neither (margin {margin:.1}): the exchange kept",
+        what(&rival)
+    );
+    let f = SensorFinding {
+        source: "exchange scan, re-calibrated".into(),
+        evidence,
+        ..exchange
+    };
     Ok(Some((f, st)))
 }
 
