@@ -1331,6 +1331,21 @@ pub(crate) fn rmse_unmasked(r: &DMatrix<f64>, rows: &[usize], mask: &DMatrix<boo
 mod tests {
     use super::*;
 
+    /// What a scan reads: `rec`, the residual `r` and the fitted values `m` (microstrain).
+    fn input<'a>(
+        rec: &'a MeasuredRecord,
+        r: &'a DMatrix<f64>,
+        m: &'a DMatrix<f64>,
+    ) -> ScanInput<'a> {
+        ScanInput {
+            rec,
+            residual: r,
+            fitted: m,
+            unit: "microstrain",
+            earliest: 0,
+        }
+    }
+
     fn record(y: DMatrix<f64>) -> MeasuredRecord {
         let n = y.nrows();
         MeasuredRecord {
@@ -1381,13 +1396,7 @@ mod tests {
         let fitted = DMatrix::from_fn(n, 4, truth);
         let r = &y - &fitted;
         let rec = record(y.clone());
-        let inp = ScanInput {
-            rec: &rec,
-            residual: &r,
-            fitted: &fitted,
-            unit: "microstrain",
-            earliest: 0,
-        };
+        let inp = input(&rec, &r, &fitted);
         let f = exchange_scan(&inp, &SensorConfig::default());
         assert_eq!(f.len(), 1, "{f:?}");
         assert_eq!(f[0].gauges, vec!["SG2", "SG4"]);
@@ -1432,13 +1441,7 @@ mod tests {
         let fitted = DMatrix::from_fn(n, 4, |i, g| truth(i, swap(g)));
         let r = &y - &fitted;
         let rec = record(y.clone());
-        let inp = ScanInput {
-            rec: &rec,
-            residual: &r,
-            fitted: &fitted,
-            unit: "microstrain",
-            earliest: 0,
-        };
+        let inp = input(&rec, &r, &fitted);
         let f = exchange_candidates(&inp, &SensorConfig::default(), Side::Before);
         assert_eq!(f[0].gauges, vec!["SG1", "SG3"], "{f:?}");
         assert!(exchange_scan(&inp, &SensorConfig::default()).is_empty());
@@ -1500,13 +1503,7 @@ mod tests {
         });
         let r = &y - &fitted;
         let rec = record(y);
-        let inp = ScanInput {
-            rec: &rec,
-            residual: &r,
-            fitted: &fitted,
-            unit: "microstrain",
-            earliest: 0,
-        };
+        let inp = input(&rec, &r, &fitted);
         let found = gain_scan(&inp, &SensorConfig::default(), &[]);
         // one finding: gauge 3's whole-record slope is not a change (the slope after a row
         // alone would read it as one at the first row the scan tries)
@@ -1594,13 +1591,7 @@ mod tests {
         let scan = |y: DMatrix<f64>| {
             let r = &y - &fitted;
             let rec = record(y);
-            let inp = ScanInput {
-                rec: &rec,
-                residual: &r,
-                fitted: &fitted,
-                unit: "microstrain",
-                earliest: 0,
-            };
+            let inp = input(&rec, &r, &fitted);
             noise_scan(&inp, &cfg, &[]).unwrap()
         };
         let quiet = 15;
@@ -1678,13 +1669,7 @@ mod tests {
         }
         let fitted = DMatrix::zeros(n, 3);
         let rec = record(y.clone());
-        let inp = ScanInput {
-            rec: &rec,
-            residual: &y,
-            fitted: &fitted,
-            unit: "microstrain",
-            earliest: 0,
-        };
+        let inp = input(&rec, &y, &fitted);
         let f = stuck_scan(&inp, &SensorConfig::default());
         assert_eq!(f.len(), 1);
         assert_eq!(
@@ -1708,13 +1693,7 @@ mod tests {
         let r = DMatrix::from_fn(n, 4, |i, g| {
             wiggle(i, g) + if i >= from { 4.0 * sens[(i, g)] } else { 0.0 }
         });
-        let inp = ScanInput {
-            rec: &rec,
-            residual: &r,
-            fitted: &fitted,
-            unit: "microstrain",
-            earliest: 0,
-        };
+        let inp = input(&rec, &r, &fitted);
         let (t, f) = attribute("gap alarm", &inp, &sens, from);
         assert_eq!(t.verdict, "structure", "{t:?}");
         assert!(f.is_none());
