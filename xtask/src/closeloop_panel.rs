@@ -102,6 +102,10 @@ pub struct PanelArgs {
     /// JSON of every record.
     #[arg(long, default_value = "docs/results/closeloop-panel.json")]
     json: PathBuf,
+    /// Score the oracle of every record of the plan again (the records are simulated again,
+    /// not run), as when its definition changed.
+    #[arg(long)]
+    rescore_oracle: bool,
     /// Also write each record's whole report (`results.json` of `bamudi close-loop`) into this
     /// folder as `<kind>-<magnitude>-<onset>-<seed>.json`, for reading one record in full.
     #[arg(long)]
@@ -151,21 +155,35 @@ const ORACLE_CHI2_99: f64 = 6.634_896_601;
 const ORACLE_RELIABLE: f64 = 0.9;
 
 impl Oracle {
-    /// From the readings before (`y0`) and after (`y1`) the effect was written, the noise sd,
-    /// and for a noise increase its sd ratio and first row.
+    /// From the readings before (`y0`, noisy) and after (`y1`) the effect of `kind` at
+    /// magnitude `level` was written from row `first`, and the noise sd. Where the written
+    /// change carries the readings' noise (a stuck or dead gauge replaces a noisy reading, an
+    /// exchange swaps two, a gain scales one), that noise's expected share of the sum of
+    /// squares is taken out: `λ` is the change's own.
     fn new(
         kind: &str,
+        level: usize,
+        first: usize,
         y0: &DMatrix<f64>,
         y1: &DMatrix<f64>,
         noise: f64,
-        noise_increase: Option<(f64, usize)>,
     ) -> Self {
-        let lambda = match (kind, noise_increase) {
-            ("noise", Some((r, first))) => {
-                let (m, r2) = ((y0.nrows() - first) as f64, r * r);
+        let d = y1 - y0;
+        let changed = d.iter().filter(|v| **v != 0.0).count() as f64;
+        // the noise variance each changed cell's square carries, in noise variances
+        let carried = match kind {
+            "stuck" | "dead" => 1.0,
+            "exchange" => 2.0,
+            "gain" => SIZES[0][level].powi(2),
+            _ => 0.0,
+        };
+        let lambda = match kind {
+            "noise" => {
+                let (m, r2) = ((y0.nrows() - first) as f64, NOISE_RATIOS[level].powi(2));
                 m * (r2 - 1.0 - r2.ln())
             }
-            _ => (y1 - y0).iter().map(|d| d * d).sum::<f64>() / (noise * noise),
+            _ => (d.iter().map(|v| v * v).sum::<f64>() / (noise * noise) - carried * changed)
+                .max(0.0),
         };
         // P(|Z + √λ| > √c), Z standard normal
         let (c, l) = (ORACLE_CHI2_99.sqrt(), lambda.sqrt());
@@ -231,7 +249,7 @@ pub fn run(args: &PanelArgs) -> Result<()> {
         let j = match done.remove(&key) {
             // a record run before the oracle was scored: the record is simulated again (no
             // loop) for it, and the line appended again with it (the last line of a key wins)
-            Some(mut j) if j.get("oracle").is_none() => {
+            Some(mut j) if args.rescore_oracle || j.get("oracle").is_none() => {
                 let p = prepare(args, &contact, kind, magnitude, onset, *seed)?;
                 j["oracle"] = oracle_json(p.oracle);
                 append_line(&progress, &j)?;
@@ -249,8 +267,15 @@ pub fn run(args: &PanelArgs) -> Result<()> {
         records.push(j);
     }
     // the progress file rewritten with one line per record (a record scored again was appended
-    // again): the records of other plans first, by key, then this plan's
-    let mut others: Vec<serde_json::Value> = done.into_values().collect();
+    // again): the records of other plans first, by key, then this plan's; read again first,
+    // so that lines another run appended meanwhile are kept
+    let mine: std::collections::HashSet<&str> =
+        records.iter().filter_map(|j| j["key"].as_str()).collect();
+    let mut others: Vec<serde_json::Value> = read_progress(&progress)?
+        .into_iter()
+        .filter(|(k, _)| !mine.contains(k.as_str()))
+        .map(|(_, j)| j)
+        .collect();
     others.sort_by(|a, b| a["key"].as_str().cmp(&b["key"].as_str()));
     let mut lines = String::new();
     for j in others.iter().chain(&records) {
@@ -624,8 +649,9 @@ fn prepare(
     let gap_end = inject(&mut rec, contact, kind, level, onset, seed)?;
     let noise = fc.noise_sd_microstrain;
     let first = rec.time_h.iter().position(|t| t / 24.0 >= onset);
-    let increase = first.map(|f| (NOISE_RATIOS[level], f));
-    let oracle = (kind != "clean").then(|| Oracle::new(kind, &y0, &rec.y, noise, increase));
+    let oracle = first
+        .filter(|_| kind != "clean")
+        .map(|f| Oracle::new(kind, level, f, &y0, &rec.y, noise));
     Ok(Prepared {
         rec,
         calibrator,
@@ -1106,7 +1132,7 @@ fn summary_table(panels: &[Panel]) -> String {
     row(
         &mut s,
         "an oracle detects the effect (power ≥ 0.9 at the 1 % level)",
-        &effect,
+        &|x| x.oracle.is_some(),
         &|x, _| x.oracle.is_some_and(|o| o.power >= ORACLE_RELIABLE),
     );
     row(

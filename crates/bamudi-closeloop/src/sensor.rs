@@ -1234,7 +1234,7 @@ const CHANGE_EVIDENCE: f64 = 6.635;
 /// Days either side of a tested change's start over which a one-gauge finding's own onset is
 /// looked for: the scan dates a change by its first clear level shift, which for a slow drift
 /// or a small gain comes days after the fault began.
-const ONSET_SEARCH_DAYS: f64 = 3.0;
+pub(crate) const ONSET_SEARCH_DAYS: f64 = 3.0;
 
 /// A one-gauge finding (step, drift, gain change) re-dated and re-sized at the onset within
 /// [`ONSET_SEARCH_DAYS`] of its start whose single regressor removes the most of the gauge's
@@ -1573,7 +1573,7 @@ mod tests {
 
     /// A gain change the fit learnt (fitted on readings with the change in them) shows on the
     /// rows before its day as `-k · strain`, whose first differences swing with the load like
-    /// noise: the noise scan must leave it (the gain scan's), judging the span against the
+    /// noise: the noise scan must leave it (for the gain scan), judging the span against the
     /// gauge's noise on the rows outside it. As on panel seed 1003 (SG3, +10 % from day 5), the
     /// fit's in-sample residual on the record's first rows is shrunk (a discrepancy GP follows
     /// rows whose inputs no other row is near: 0.21 there for a noise of 1), so the scan sees
@@ -1658,6 +1658,22 @@ mod tests {
             String::new(),
         );
         assert_eq!(log_jacobian(&[aside, exchange], &rows), 0.0);
+        // what the Jacobian is for: a density of the corrected readings plus it is the density
+        // of the readings as recorded (here N(0, s²) per corrected cell, s = 1.25, read as
+        // N(0, 1) after the correction divides by s)
+        let f = gain(0.25, (0, 40));
+        let y = DMatrix::from_fn(40, 3, |i, g| wiggle(i, g) * if g == 1 { 1.25 } else { 1.0 });
+        let (yc, _) = apply(std::slice::from_ref(&f), &y, &y, &rec.time_h, None);
+        let ln_n = |v: f64, sd: f64| {
+            -0.5 * (v / sd).powi(2) - sd.ln() - 0.5 * (2.0 * std::f64::consts::PI).ln()
+        };
+        let corrected: f64 = rows.iter().map(|&i| ln_n(yc[(i, 1)], 1.0)).sum();
+        let recorded: f64 = rows.iter().map(|&i| ln_n(y[(i, 1)], 1.25)).sum();
+        let j = log_jacobian(&[f], &rows);
+        assert!(
+            (corrected + j - recorded).abs() < 1e-9,
+            "{corrected} + {j} vs {recorded}"
+        );
     }
 
     #[test]

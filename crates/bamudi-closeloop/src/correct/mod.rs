@@ -26,8 +26,10 @@ pub(super) struct PrePass {
     pub tests: Vec<AttributionTest>,
     /// One-gauge findings not applied: other gauges changed at the same time.
     pub coincident: Vec<SensorFinding>,
-    /// A calibration on readings an exchange relabelled, made to decide which side of its day
-    /// was wired right ([`relabel`]); it replaces the first calibration as the pass's base.
+    /// A calibration on readings an exchange relabelled: one made to decide which side of its
+    /// day was wired right ([`relabel`]) or whether it beats the test's rival ([`contest`]), or
+    /// one on an exchange kept from inside the calibration window; it replaces the first
+    /// calibration as the pass's base.
     pub relabelled: Option<Relabelled>,
 }
 
@@ -42,8 +44,10 @@ pub(super) struct Relabelled {
 /// corrected from the verdict (its step or offset there is that fault seen through the
 /// calibration). An exchange has a structural rival (a change of the parameter moves every
 /// gauge), so it is kept only when the structure-or-sensor test over its span calls it a
-/// sensor's; an exchange found before its day is then re-calibrated both ways ([`relabel`]),
-/// and the scans after it read the calibration kept.
+/// sensor's, or, from inside the calibration window, when it wins the re-calibration against
+/// the test's own hypothesis ([`contest`]); an exchange found before its day is then
+/// re-calibrated both ways ([`relabel`]). The scans after them read the last calibration on
+/// relabelled readings (an exchange kept from inside the window is always re-calibrated on).
 pub(super) fn pre_pass(lp: &Loop<'_>, rec: &MeasuredRecord, first: &State) -> Result<PrePass> {
     let mut tests = Tests {
         x: lp.x,
@@ -115,7 +119,9 @@ impl Tests<'_> {
 /// an onset to the end that the structure-or-sensor test confirms, or, from inside the
 /// calibration window, that win the re-calibration against the test's own hypothesis
 /// ([`contest`]); then an exchange seen before its day, decided by re-calibration
-/// ([`relabel`]). The calibration of the last one decided by re-calibration is returned.
+/// ([`relabel`]). Returns the last calibration on relabelled readings: [`relabel`]'s, else
+/// [`contest`]'s, else one on the exchanges kept from inside the window (`None` when there is
+/// none, or when that calibration fails: the pass then reads the first calibration).
 fn exchanges(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
@@ -154,7 +160,13 @@ fn exchanges(
     let inside =
         |f: &SensorFinding| f.kind == SensorKind::ChannelExchange && f.from_row < cal_end(lp);
     if decided.is_none() && found.iter().any(inside) {
-        decided = Some(recalibrate(lp, rec, first, found, None)?.1);
+        decided = match recalibrate(lp, rec, first, found, None) {
+            Ok((_, st)) => Some(st),
+            Err(e) => {
+                log::warn!("re-calibration on the exchanges failed, the first kept: {e}");
+                None
+            }
+        };
     }
     // an exchange the first calibration learnt shows before its day: the strongest few pairs
     // whose change the structure-or-sensor test calls a sensor's (any sensor hypothesis: a
@@ -392,10 +404,15 @@ fn recalibrate(
 /// day 30 (window to day 36) was corrected as a gain of -0.48 on one gauge, and the gap came
 /// out 60.5 ± 5.1 in for a true 90. So both are decided by re-calibration, each with its
 /// correction applied ([`recalibrate`]; the exchange re-dated without the fit's map of the
-/// pair, [`sensor::exchange_onset`]): the exchange is kept, with its calibration, when its log
-/// evidence beats both the rival's and that of the readings with neither by more than `ln 2`
-/// (a Bayes factor above the prior odds of one of the two). `None` otherwise: the rival is
-/// left to the later scans, which find it again on the first calibration's residual.
+/// pair, [`sensor::exchange_onset`], within [`sensor::ONSET_SEARCH_DAYS`] of the scan's day,
+/// else the scan's day): the exchange is kept, with its calibration, when its log evidence
+/// beats both the rival's and that of the readings with neither by more than `ln 2` (a Bayes
+/// factor above the prior odds of one of the two). The rival is corrected, never set aside
+/// (set-aside cells are filled with the first calibration's prediction, which would fit them
+/// by construction). The comparison leans towards the rival: its size was fitted to these
+/// readings and is plugged in, with no Occam penalty, while the exchange has none to fit.
+/// `None` otherwise, and nothing is recorded of the rival here: the later scans judge the
+/// pass's residual afresh (a gain change by the gain scan; a step or drift by the library).
 fn contest(
     lp: &Loop<'_>,
     rec: &MeasuredRecord,
@@ -407,8 +424,14 @@ fn contest(
     let n = lp.y.nrows();
     let pair = (exchange.gauge_columns[0], exchange.gauge_columns[1]);
     let min_span = lp.cfg.sensor.min_span_rows;
-    let tau =
-        sensor::exchange_onset(lp.y, &first.mean, pair, min_span).unwrap_or(exchange.from_row);
+    let t = &rec.time_h;
+    let tau = sensor::exchange_onset(lp.y, &first.mean, pair, min_span)
+        .filter(|&i| (t[i] - t[exchange.from_row]).abs() <= sensor::ONSET_SEARCH_DAYS * 24.0)
+        .unwrap_or(exchange.from_row);
+    let rival = SensorFinding {
+        action: sensor::SensorAction::Corrected,
+        ..rival
+    };
     let exchange = SensorFinding {
         from_row: tau,
         from_day: rec.time_h[tau] / 24.0,
@@ -514,7 +537,7 @@ const FILL_SETTLED_SD: f64 = 0.1;
 ///   it: 90.04 ± 0.12 in).
 ///
 /// `first` is the pass's base: the first calibration, or the calibration on relabelled
-/// readings the pass kept ([`relabel`]), which is re-used when the corrected readings are the
+/// readings the pass kept ([`PrePass::relabelled`]), which is re-used when the corrected readings are the
 /// ones it was fitted to and no row is left out. Returns the corrected readings, the state
 /// (`None` with no finding) and the rows the calibrations read.
 pub(super) fn apply_and_recalibrate(
