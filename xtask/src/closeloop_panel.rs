@@ -209,6 +209,8 @@ enum InSample {
 }
 
 pub fn run(args: &PanelArgs) -> Result<()> {
+    // the loop's warnings (a failed re-calibration, ...) and, with RUST_LOG=info, its trace
+    bamudi_gate::progress::init_logging(false);
     let kinds: Vec<String> = match &args.kinds {
         Some(k) => k.split(',').map(|s| s.trim().to_string()).collect(),
         None => KINDS.iter().map(|s| s.to_string()).collect(),

@@ -638,3 +638,48 @@ fn fe_gate_an_exchange_inside_the_calibration_window_is_not_taken_for_a_gain() {
         assert!(holds_true_gap(r), "seed {seed}: {:?}", r.theta_after);
     }
 }
+
+/// The close-loop panel's record of seed 1004 (hourly rows, the library's calibrator at full
+/// size, the FE gate at the 24-in mesh) with SG3's readings 10 % high from day 30, inside the
+/// calibration window (days 0-36). The first calibration learns days 30-36 of it, and the scans
+/// dated the gain from day 35.75 and sized it +0.067; a gauge drift was added beside it and
+/// the track raised a gap alarm (error 1.82x the noise). The finding is now dated again
+/// against a calibration on the window's days before 25.75 and decided by re-calibration: it
+/// must be the one finding, dated within a day of day 30 through that route, sized within 4 of
+/// its sds of +0.10, with no gap alarm and the gap's 95 % interval holding 90 in. The same
+/// dating on this file's 2-hour records at the half-size calibrator (seeds 10-17, 1004, 1005 and 2004 probed)
+/// finds the day without help, so only the panel's record shows the route; at 30-40 s it is
+/// left out of CI's run (`cargo test -p bamudi-gate --release --test lib -- --ignored`).
+#[test]
+#[ignore = "the panel's hourly record at full size: 30-40 s, outside CI's time"]
+fn fe_gate_a_gain_the_first_calibration_learnt_is_dated_from_its_day() {
+    let c = contact();
+    let fc = FieldConfig::default().seed(1004).duration(60.0, 60.0);
+    let rec = gate::simulate_field(&fc, c).unwrap();
+    let calibrator = GateCalibrator::new(c.clone(), (60.0, 150.0)).unwrap();
+    let mut data = gate::as_measured(&rec, calibrator.model(), "panel.csv").unwrap();
+    for i in (0..data.len()).filter(|&i| data.time_h[i] / 24.0 >= 30.0) {
+        data.y[(i, 2)] *= 1.10;
+    }
+    let out = run_measured(&data, &calibrator, "panel seed 1004, SG3 +10 % from day 30");
+    let r = &out.report;
+    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
+    let [f] = s.findings.as_slice() else {
+        panic!("one finding expected: {:?}", s.findings);
+    };
+    assert_eq!(
+        (f.kind, f.gauge_columns.as_slice()),
+        (SensorKind::Gain, [2].as_slice())
+    );
+    assert!(f.evidence.contains("dated again"), "{}", f.evidence);
+    assert!((f.from_day - 30.0).abs() <= 1.0, "{}", f.from_day);
+    let (k, sd) = (f.size.unwrap(), f.size_sd.unwrap());
+    assert!((k - 0.10).abs() <= 4.0 * sd, "{k} ± {sd}");
+    assert!(r.effects.is_empty(), "{:?}", r.effects);
+    assert!(
+        r.alarms.iter().all(|a| a.subject != "parameter"),
+        "gap alarm for a gauge's gain: {:?}",
+        r.alarms
+    );
+    assert!(holds_true_gap(r), "{:?}", r.theta_after);
+}
