@@ -653,15 +653,11 @@ fn fe_gate_an_exchange_inside_the_calibration_window_is_not_taken_for_a_gain() {
 #[test]
 #[ignore = "the panel's hourly record at full size: 30-40 s, outside CI's time"]
 fn fe_gate_a_gain_the_first_calibration_learnt_is_dated_from_its_day() {
-    let c = contact();
-    let fc = FieldConfig::default().seed(1004).duration(60.0, 60.0);
-    let rec = gate::simulate_field(&fc, c).unwrap();
-    let calibrator = GateCalibrator::new(c.clone(), (60.0, 150.0)).unwrap();
-    let mut data = gate::as_measured(&rec, calibrator.model(), "panel.csv").unwrap();
-    for i in (0..data.len()).filter(|&i| data.time_h[i] / 24.0 >= 30.0) {
-        data.y[(i, 2)] *= 1.10;
-    }
-    let out = run_measured(&data, &calibrator, "panel seed 1004, SG3 +10 % from day 30");
+    let out = run_panel_record(1004, "panel seed 1004, SG3 +10 % from day 30", |y, t| {
+        for i in (0..y.nrows()).filter(|&i| t[i] / 24.0 >= 30.0) {
+            y[(i, 2)] *= 1.10;
+        }
+    });
     let r = &out.report;
     let s = r.sensor.as_ref().expect("the sensor pass runs by default");
     let [f] = s.findings.as_slice() else {
@@ -679,6 +675,79 @@ fn fe_gate_a_gain_the_first_calibration_learnt_is_dated_from_its_day() {
     assert!(
         r.alarms.iter().all(|a| a.subject != "parameter"),
         "gap alarm for a gauge's gain: {:?}",
+        r.alarms
+    );
+    assert!(holds_true_gap(r), "{:?}", r.theta_after);
+}
+
+/// The close-loop panel's hourly record of `seed` at full size with `fault` written in, run
+/// through the loop (the panel's `prepare` and `one`, without the scoring).
+fn run_panel_record(
+    seed: u64,
+    label: &str,
+    fault: impl Fn(&mut nalgebra::DMatrix<f64>, &[f64]),
+) -> CloseLoopOutcome {
+    let c = contact();
+    let fc = FieldConfig::default().seed(seed).duration(60.0, 60.0);
+    let rec = gate::simulate_field(&fc, c).unwrap();
+    let calibrator = GateCalibrator::new(c.clone(), (60.0, 150.0)).unwrap();
+    let mut data = gate::as_measured(&rec, calibrator.model(), "panel.csv").unwrap();
+    fault(&mut data.y, &data.time_h);
+    run_measured(&data, &calibrator, label)
+}
+
+/// The panel's seed 1003 with SG4 stuck from day 30, inside the calibration window: the first
+/// calibration fitted six frozen days, and where the inputs return (day 57) what it learnt moved
+/// SG1's prediction; the gain scan read that as a gain of −0.228 on SG1 from day 57, confirmed,
+/// and the test error was 3.3x the noise. The scans after the stuck scan now read a calibration
+/// on the window's rows free of the set-aside cells: the stuck gauge must be the one finding,
+/// with no gap alarm and the gap's interval holding 90 in. And with SG3 10 % high from day 30
+/// on the same record: SG3's gain must be the one finding (two opposite gains of ±0.042 on
+/// SG2 from day 57 beside it before, read against the first calibration that had learnt six
+/// days of SG3's gain; they are now tested again on a calibration with SG3 corrected). 20-30 s
+/// each: out of CI's run, as the test above.
+#[test]
+#[ignore = "the panel's hourly records at full size: about a minute, outside CI's time"]
+fn fe_gate_a_fault_the_first_calibration_fitted_moves_no_other_gauge() {
+    let out = run_panel_record(1003, "panel seed 1003, SG4 stuck from day 30", |y, t| {
+        let first = t.iter().position(|&h| h / 24.0 >= 30.0).unwrap();
+        let v = y[(first - 1, 3)];
+        for i in first..y.nrows() {
+            y[(i, 3)] = v;
+        }
+    });
+    let r = &out.report;
+    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
+    let [f] = s.findings.as_slice() else {
+        panic!("stuck: one finding expected: {:?}", s.findings);
+    };
+    assert_eq!(
+        (f.kind, f.gauge_columns.as_slice()),
+        (SensorKind::Stuck, [3].as_slice())
+    );
+    assert!(
+        r.alarms.iter().all(|a| a.subject != "parameter"),
+        "{:?}",
+        r.alarms
+    );
+    assert!(holds_true_gap(r), "{:?}", r.theta_after);
+    let out = run_panel_record(1003, "panel seed 1003, SG3 +10 % from day 30", |y, t| {
+        for i in (0..y.nrows()).filter(|&i| t[i] / 24.0 >= 30.0) {
+            y[(i, 2)] *= 1.10;
+        }
+    });
+    let r = &out.report;
+    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
+    let [f] = s.findings.as_slice() else {
+        panic!("gain: one finding expected: {:?}", s.findings);
+    };
+    assert_eq!(
+        (f.kind, f.gauge_columns.as_slice()),
+        (SensorKind::Gain, [2].as_slice())
+    );
+    assert!(
+        r.alarms.iter().all(|a| a.subject != "parameter"),
+        "{:?}",
         r.alarms
     );
     assert!(holds_true_gap(r), "{:?}", r.theta_after);
