@@ -671,66 +671,14 @@ fn redate(
     found: &mut [SensorFinding],
     i: usize,
 ) -> Result<Option<(bool, Relabelled)>> {
-    let (t, n_cal) = (&rec.time_h, cal_end(lp));
     let f = found[i].clone();
-    if n_cal == 0 || f.from_row == 0 || f.from_row >= t.len() {
-        return Ok(None);
-    }
-    let day = |i: usize| t[i] / 24.0;
-    if f.from_day > day(n_cal - 1) + sensor::ONSET_SEARCH_DAYS {
-        return Ok(None);
-    }
-    let cut = t[f.from_row] - REDATE_DAYS * 24.0;
-    let rows: Vec<usize> = lp.cal.iter().copied().filter(|&c| t[c] < cut).collect();
-    if 2 * rows.len() < lp.cal.len() {
-        return Ok(None);
-    }
     let others: Vec<SensorFinding> = found
         .iter()
         .enumerate()
         .filter(|&(j, _)| j != i)
         .map(|(_, x)| x.clone())
         .collect();
-    let y = sensor::apply(&others, lp.y, &first.mean, t, None).0;
-    let mean = match lp.with_y(&y).with_fit_rows(&rows).calibrate(&y) {
-        Ok((_, mean, _)) => mean,
-        Err(e) => {
-            log::warn!(
-                "{}: the calibration to date it again failed: {e}",
-                f.describe()
-            );
-            return Ok(None);
-        }
-    };
-    let lo = t.iter().position(|&h| h >= cut).unwrap_or(f.from_row);
-    let early = match f.kind {
-        SensorKind::Gain => {
-            let r = &y - &mean;
-            sensor::gain_onset(&r, &mean, f.gauge_columns[0], lo..f.from_row + 1).map(
-                |(at, k, sd)| SensorFinding {
-                    size: Some(k),
-                    size_sd: Some(sd),
-                    ..SensorFinding {
-                        from_row: at,
-                        from_day: day(at),
-                        ..f.clone()
-                    }
-                },
-            )
-        }
-        SensorKind::ChannelExchange => {
-            let pair = (f.gauge_columns[0], f.gauge_columns[1]);
-            sensor::exchange_onset(&y, &mean, pair, lp.cfg.sensor.min_span_rows)
-                .filter(|&at| at >= lo && at < f.from_row)
-                .map(|at| SensorFinding {
-                    from_row: at,
-                    from_day: day(at),
-                    ..f.clone()
-                })
-        }
-        _ => None,
-    };
-    let Some(early) = early.filter(|e| f.from_day - e.from_day >= REDATE_MIN_DAYS) else {
+    let Some((early, cut_day)) = earlier_onset(lp, rec, first, &others, &f) else {
         return Ok(None);
     };
     let fit = |x: &SensorFinding| match recalibrate(lp, rec, first, &others, Some(x)) {
@@ -755,15 +703,78 @@ fn redate(
     }
     found[i] = SensorFinding {
         evidence: format!(
-            "{}; dated again against a calibration on the window's days before {:.2} (the first calibration can learn a fault's first days): from day {:.2}, re-calibrated with each dating applied, log evidence {z_early:.1} against {z_late:.1} from day {:.2} (margin {margin:.1})",
-            f.evidence,
-            cut / 24.0,
-            early.from_day,
-            f.from_day
+            "{}; dated again against a calibration on the window's days before {cut_day:.2} (the first calibration can learn a fault's first days): from day {:.2}, re-calibrated with each dating applied, log evidence {z_early:.1} against {z_late:.1} from day {:.2} (margin {margin:.1})",
+            f.evidence, early.from_day, f.from_day
         ),
         ..early
     };
     Ok(Some((true, st_early)))
+}
+
+/// [`redate`]'s candidate: finding `f` from the onset a calibration on the window's rows more
+/// than [`REDATE_DAYS`] before it reads (the pass's `others` applied), with the day those rows
+/// end; `None` when `f` is not a gain change or an exchange dated late in the window or just
+/// after it, when those rows are fewer than half the window's, when the calibration fails, or
+/// when the onset is not at least [`REDATE_MIN_DAYS`] earlier.
+fn earlier_onset(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    first: &State,
+    others: &[SensorFinding],
+    f: &SensorFinding,
+) -> Option<(SensorFinding, f64)> {
+    let (t, n_cal) = (&rec.time_h, cal_end(lp));
+    if n_cal == 0 || f.from_row == 0 || f.from_row >= t.len() {
+        return None;
+    }
+    let day = |i: usize| t[i] / 24.0;
+    if f.from_day > day(n_cal - 1) + sensor::ONSET_SEARCH_DAYS {
+        return None;
+    }
+    let cut = t[f.from_row] - REDATE_DAYS * 24.0;
+    let rows: Vec<usize> = lp.cal.iter().copied().filter(|&c| t[c] < cut).collect();
+    if 2 * rows.len() < lp.cal.len() {
+        return None;
+    }
+    let y = sensor::apply(others, lp.y, &first.mean, t, None).0;
+    let mean = match lp.with_y(&y).with_fit_rows(&rows).calibrate(&y) {
+        Ok((_, mean, _)) => mean,
+        Err(e) => {
+            log::warn!(
+                "{}: the calibration to date it again failed: {e}",
+                f.describe()
+            );
+            return None;
+        }
+    };
+    let lo = t.iter().position(|&h| h >= cut).unwrap_or(f.from_row);
+    let at = |at: usize| SensorFinding {
+        from_row: at,
+        from_day: day(at),
+        ..f.clone()
+    };
+    let early = match f.kind {
+        SensorKind::Gain => {
+            let r = &y - &mean;
+            sensor::gain_onset(&r, &mean, f.gauge_columns[0], lo..f.from_row + 1).map(
+                |(i, k, sd)| SensorFinding {
+                    size: Some(k),
+                    size_sd: Some(sd),
+                    ..at(i)
+                },
+            )
+        }
+        SensorKind::ChannelExchange => {
+            let pair = (f.gauge_columns[0], f.gauge_columns[1]);
+            sensor::exchange_onset(&y, &mean, pair, lp.cfg.sensor.min_span_rows)
+                .filter(|&i| i >= lo && i < f.from_row)
+                .map(at)
+        }
+        _ => None,
+    };
+    early
+        .filter(|e| f.from_day - e.from_day >= REDATE_MIN_DAYS)
+        .map(|e| (e, cut / 24.0))
 }
 
 /// A calibration's log evidence, or (when its model has none) the Gaussian profile likelihood
