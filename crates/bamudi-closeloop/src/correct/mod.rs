@@ -274,12 +274,7 @@ fn reconfirm(
             continue;
         }
         let f = found[i].clone();
-        let others: Vec<SensorFinding> = found
-            .iter()
-            .enumerate()
-            .filter(|&(j, _)| j != i)
-            .map(|(_, x)| x.clone())
-            .collect();
+        let others = all_but(found, i);
         let r = apply(&others) - &b.state.mean;
         let inp = ScanInput {
             rec,
@@ -545,6 +540,31 @@ fn recalibrate(
     Ok((z, Relabelled { state, y }))
 }
 
+/// [`recalibrate`] with `f` applied beside `found`, as a hypothesis to compare: `None`, with a
+/// warning, when the calibration cannot fit it (not a candidate; the loop goes on).
+fn candidate(
+    lp: &Loop<'_>,
+    rec: &MeasuredRecord,
+    first: &State,
+    found: &[SensorFinding],
+    f: &SensorFinding,
+) -> Option<(f64, Relabelled)> {
+    match recalibrate(lp, rec, first, found, Some(f)) {
+        Ok(c) => Some(c),
+        Err(e) => {
+            log::warn!("{}: calibration failed, not a candidate: {e}", f.describe());
+            None
+        }
+    }
+}
+
+/// Every finding of `found` but the `i`-th.
+fn all_but(found: &[SensorFinding], i: usize) -> Vec<SensorFinding> {
+    let mut v = found.to_vec();
+    v.remove(i);
+    v
+}
+
 /// An exchange the scan found from a day inside the calibration window to the end, for which
 /// the structure-or-sensor test preferred another sensor hypothesis (`rival`, such as one
 /// gauge's gain change). The test scores the exchange by swapping the readings back against
@@ -593,13 +613,7 @@ fn contest(
         false => recalibrate(lp, rec, first, found, None)?.0,
     };
     // a hypothesis the calibration cannot fit is not a candidate (the loop goes on)
-    let fit = |f: &SensorFinding| match recalibrate(lp, rec, first, found, Some(f)) {
-        Ok(c) => Some(c),
-        Err(e) => {
-            log::warn!("{}: calibration failed, not a candidate: {e}", f.describe());
-            None
-        }
-    };
+    let fit = |f: &SensorFinding| candidate(lp, rec, first, found, f);
     let Some((z, st)) = fit(&exchange) else {
         return Ok(None);
     };
@@ -672,22 +686,11 @@ fn redate(
     i: usize,
 ) -> Result<Option<(bool, Relabelled)>> {
     let f = found[i].clone();
-    let others: Vec<SensorFinding> = found
-        .iter()
-        .enumerate()
-        .filter(|&(j, _)| j != i)
-        .map(|(_, x)| x.clone())
-        .collect();
+    let others = all_but(found, i);
     let Some((early, cut_day)) = earlier_onset(lp, rec, first, &others, &f) else {
         return Ok(None);
     };
-    let fit = |x: &SensorFinding| match recalibrate(lp, rec, first, &others, Some(x)) {
-        Ok(c) => Some(c),
-        Err(e) => {
-            log::warn!("{}: calibration failed, not a candidate: {e}", x.describe());
-            None
-        }
-    };
+    let fit = |x: &SensorFinding| candidate(lp, rec, first, &others, x);
     let (Some((z_late, late)), Some((z_early, st_early))) = (fit(&f), fit(&early)) else {
         return Ok(None);
     };
