@@ -126,6 +126,26 @@ pub struct Calibration {
 /// let cfg = CalibrationParams::default().estimator(EstimatorParams::ExactLinear).gp_restarts(0).check().unwrap();
 /// let cal = bamudi::calibrate(&model, &exps, &cfg).unwrap();
 /// assert!(cal.module3().posterior.mean()[0] > 0.0);
+/// // Module 4: the corrected response at x = 3 (three points) with its 95 % band
+/// let band = cal.predictor(&model).unwrap().response(&[3.0]).unwrap();
+/// assert_eq!(band.mean.len(), 3);
+/// assert!(band.lower.iter().zip(&band.upper).all(|(l, u)| l <= u));
+///
+/// // The same run through the executor, with an observer that counts the finished stages
+/// // (an observer sees events, never the algorithm's state)
+/// use bamudi::observe::{Event, Observer};
+/// struct Stages(std::sync::atomic::AtomicUsize);
+/// impl Observer for Stages {
+///     fn observe(&self, e: &Event<'_>) {
+///         if let Event::Finished { .. } = e {
+///             self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+///         }
+///     }
+/// }
+/// let stages = Stages(0.into());
+/// let again = bamudi::Calibrate::new(&cfg).observer(&stages).run(&model, &exps).unwrap();
+/// assert!(stages.0.into_inner() > 0);
+/// assert_eq!(again.module3().posterior.mean(), cal.module3().posterior.mean());
 /// ```
 pub fn calibrate<U, O>(
     model: &MultiLevelModel<U, O>,
@@ -140,7 +160,8 @@ where
 }
 
 /// The calibration executor: a checked configuration and an observer; [`run`](Self::run)
-/// executes the stages, times them and reports them.
+/// executes the stages, times them and reports them (an example with an observer, and the
+/// [`Predictor`](crate::Predictor) made from its result: [`calibrate`]).
 pub struct Calibrate<'a> {
     cfg: &'a CalibrationConfig,
     observer: &'a dyn Observer,

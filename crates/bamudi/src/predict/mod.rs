@@ -58,7 +58,8 @@ pub struct Band {
     pub upper: Vec<f64>,
 }
 
-/// Module-4 predictions of a calibration on its model (see the module docs).
+/// Module-4 predictions of a calibration on its model (see the module docs), made by
+/// [`Calibration::predictor`]; an example: [`crate::calibrate`].
 pub struct Predictor<'a, U, O> {
     cal: &'a Calibration,
     model: &'a MultiLevelModel<U, O>,
