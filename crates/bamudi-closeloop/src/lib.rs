@@ -418,13 +418,7 @@ pub fn close_loop_with(
     let (model, mean, var) = lp.calibrate(lp.y)?;
     let mut before = Before::of(&lp, model.theta_summary(), &mean, &var);
     before.adequacy = model.adequacy().cloned();
-    let mut st = State {
-        model,
-        mean,
-        var,
-        effects: vec![],
-        from_fold: vec![],
-    };
+    let mut st = State::calibrated((model, mean, var));
     // the sensor pass first: the loop then looks for effects in corrected readings
     let mut pre = match cfg.sensor.enabled {
         true => correct::pre_pass(&lp, rec, &st)?,

@@ -26,6 +26,17 @@ pub(super) struct State {
 }
 
 impl State {
+    /// A calibration's state before any effect.
+    pub(super) fn calibrated((model, mean, var): Calibrated) -> Self {
+        Self {
+            model,
+            mean,
+            var,
+            effects: vec![],
+            from_fold: vec![],
+        }
+    }
+
     /// Whether an accepted effect keeps the model fixed (a parameter trend).
     pub(super) fn model_fixed(&self) -> bool {
         self.effects.iter().any(|e| e.effect.keeps_model_fixed())

@@ -325,13 +325,7 @@ fn without_set_aside(
         return None;
     };
     match lp.with_y(&y).with_fit_rows(&rows).calibrate(&y) {
-        Ok((model, mean, var)) => Some(State {
-            model,
-            mean,
-            var,
-            effects: vec![],
-            from_fold: vec![],
-        }),
+        Ok(c) => Some(State::calibrated(c)),
         Err(e) => {
             log::warn!("the calibration without the set-aside cells failed, the first kept: {e}");
             None
@@ -528,14 +522,7 @@ fn recalibrate(
 ) -> Result<(f64, Relabelled)> {
     let all: Vec<SensorFinding> = found.iter().chain(extra).cloned().collect();
     let y = sensor::apply(&all, lp.y, &first.mean, &rec.time_h, None).0;
-    let (model, mean, var) = lp.with_y(&y).calibrate(&y)?;
-    let state = State {
-        model,
-        mean,
-        var,
-        effects: vec![],
-        from_fold: vec![],
-    };
+    let state = State::calibrated(lp.with_y(&y).calibrate(&y)?);
     let z = evidence(lp, &state, &y) + sensor::log_jacobian(&all, lp.fit_rows);
     Ok((z, Relabelled { state, y }))
 }
@@ -857,14 +844,9 @@ pub(super) fn apply_and_recalibrate(
         _ => lp.cal,
     };
     let calibrate = |y: &DMatrix<f64>| -> Result<State> {
-        let (model, mean, var) = lp.with_y(y).with_fit_rows(fit_rows).calibrate(y)?;
-        Ok(State {
-            model,
-            mean,
-            var,
-            effects: vec![],
-            from_fold: vec![],
-        })
+        Ok(State::calibrated(
+            lp.with_y(y).with_fit_rows(fit_rows).calibrate(y)?,
+        ))
     };
     let n_cal = cal_end(lp);
     let filled = matches!(rows, CalibrationRows::Filled { .. });

@@ -658,26 +658,12 @@ fn fe_gate_a_gain_the_first_calibration_learnt_is_dated_from_its_day() {
             y[(i, 2)] *= 1.10;
         }
     });
-    let r = &out.report;
-    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
-    let [f] = s.findings.as_slice() else {
-        panic!("one finding expected: {:?}", s.findings);
-    };
-    assert_eq!(
-        (f.kind, f.gauge_columns.as_slice()),
-        (SensorKind::Gain, [2].as_slice())
-    );
+    let f = the_one_finding(&out, SensorKind::Gain, 2);
     assert!(f.evidence.contains("dated again"), "{}", f.evidence);
     assert!((f.from_day - 30.0).abs() <= 1.0, "{}", f.from_day);
     let (k, sd) = (f.size.unwrap(), f.size_sd.unwrap());
     assert!((k - 0.10).abs() <= 4.0 * sd, "{k} ± {sd}");
-    assert!(r.effects.is_empty(), "{:?}", r.effects);
-    assert!(
-        r.alarms.iter().all(|a| a.subject != "parameter"),
-        "gap alarm for a gauge's gain: {:?}",
-        r.alarms
-    );
-    assert!(holds_true_gap(r), "{:?}", r.theta_after);
+    assert!(out.report.effects.is_empty(), "{:?}", out.report.effects);
 }
 
 /// The close-loop panel's hourly record of `seed` at full size with `fault` written in, run
@@ -716,39 +702,33 @@ fn fe_gate_a_fault_the_first_calibration_fitted_moves_no_other_gauge() {
             y[(i, 3)] = v;
         }
     });
-    let r = &out.report;
-    let s = r.sensor.as_ref().expect("the sensor pass runs by default");
-    let [f] = s.findings.as_slice() else {
-        panic!("stuck: one finding expected: {:?}", s.findings);
-    };
-    assert_eq!(
-        (f.kind, f.gauge_columns.as_slice()),
-        (SensorKind::Stuck, [3].as_slice())
-    );
-    assert!(
-        r.alarms.iter().all(|a| a.subject != "parameter"),
-        "{:?}",
-        r.alarms
-    );
-    assert!(holds_true_gap(r), "{:?}", r.theta_after);
+    the_one_finding(&out, SensorKind::Stuck, 3);
     let out = run_panel_record(1003, "panel seed 1003, SG3 +10 % from day 30", |y, t| {
         for i in (0..y.nrows()).filter(|&i| t[i] / 24.0 >= 30.0) {
             y[(i, 2)] *= 1.10;
         }
     });
+    the_one_finding(&out, SensorKind::Gain, 2);
+}
+
+/// The report's one sensor finding, which must be of `kind` on gauge column `g`, with no gap
+/// alarm and the gap's 95 % interval holding the truth.
+fn the_one_finding(
+    out: &CloseLoopOutcome,
+    kind: SensorKind,
+    g: usize,
+) -> &bamudi_closeloop::SensorFinding {
     let r = &out.report;
     let s = r.sensor.as_ref().expect("the sensor pass runs by default");
     let [f] = s.findings.as_slice() else {
-        panic!("gain: one finding expected: {:?}", s.findings);
+        panic!("one finding expected: {:?}", s.findings);
     };
-    assert_eq!(
-        (f.kind, f.gauge_columns.as_slice()),
-        (SensorKind::Gain, [2].as_slice())
-    );
+    assert_eq!((f.kind, f.gauge_columns.as_slice()), (kind, [g].as_slice()));
     assert!(
         r.alarms.iter().all(|a| a.subject != "parameter"),
-        "{:?}",
+        "gap alarm for a sensor fault: {:?}",
         r.alarms
     );
     assert!(holds_true_gap(r), "{:?}", r.theta_after);
+    f
 }
