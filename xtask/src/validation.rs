@@ -70,6 +70,12 @@ pub struct ValidationArgs {
     /// Write the markdown from the parts that exist.
     #[arg(long)]
     render: bool,
+    /// Bring each requested part to its size: a part written or stopped with fewer replicates
+    /// per scenario than asked runs the missing ones (as `<part>.extend-N.json`, each with its
+    /// own running log, so a stopped extension resumes too) and the pieces are merged into
+    /// `<part>.json`.
+    #[arg(long)]
+    extend: bool,
 }
 
 /// One part of the protocol.
@@ -94,6 +100,9 @@ fn parts(a: &ValidationArgs) -> Vec<Part> {
             hyper: SBC_HYPER,
             hold,
         });
+        // what the study runs for SBC (`coverage` forces it), recorded so the parts of an
+        // extension are parts of the same study
+        o.marginal.presence = DiscrepancyPresence::Assumed;
         out.push(Part {
             name: format!("sbc-{}", if hold { "held" } else { "estimated" }),
             opts: o,
@@ -186,6 +195,10 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
         .filter(|p| a.parts.iter().any(|w| w == &p.name || w == p.group))
     {
         let json = a.out.join(format!("{}.json", part.name));
+        if a.extend {
+            extend(a, part)?;
+            continue;
+        }
         if json.exists() {
             eprintln!("{}: {} exists, skipped", part.name, json.display());
             continue;
@@ -213,6 +226,118 @@ pub fn run(a: &ValidationArgs) -> Result<()> {
         .join("validation.md");
     bamudi::data::write_atomic(&path, md.as_bytes())?;
     eprintln!("wrote {}", path.display());
+    Ok(())
+}
+
+/// The pieces of a part so far: `<part>.json` (or its stopped log) and the pieces of earlier
+/// extensions (`<part>.extend-N.json` or their logs), each named by its report's path.
+fn pieces(out: &Path, name: &str) -> Result<Vec<PathBuf>> {
+    let mut found = vec![out.join(format!("{name}.json"))];
+    for n in 1.. {
+        let p = out.join(format!("{name}.extend-{n}.json"));
+        if !p.exists() && !crate::coverage::log_path(&p).exists() {
+            break;
+        }
+        found.push(p);
+    }
+    Ok(found)
+}
+
+/// The pieces merged. A replicate in more than one piece (a stopped run finishes replicates out
+/// of order, and the extension after it runs every index from the first one missing) is kept
+/// from the first piece: each replicate's data are drawn from its index, so the copies agree.
+fn combined(pieces: &[PathBuf]) -> Result<Option<bamudi_gate::coverage::CoverageReport>> {
+    let mut reports: Vec<CoverageReport> = Vec::new();
+    let mut seen = std::collections::BTreeSet::new();
+    for p in pieces {
+        let Some(mut r) = read(p)? else { continue };
+        for s in &mut r.report.scenarios {
+            s.replicates
+                .retain(|x| !seen.contains(&(s.name.clone(), format!("{:?}", s.mode), x.index)));
+        }
+        for s in &r.report.scenarios {
+            let mode = format!("{:?}", s.mode);
+            seen.extend(
+                s.replicates
+                    .iter()
+                    .map(|x| (s.name.clone(), mode.clone(), x.index)),
+            );
+        }
+        r.report.scenarios.retain(|s| !s.replicates.is_empty());
+        reports.push(r.report);
+    }
+    // a stopped run's log does not say its gate's size: it is the finished pieces' (the same
+    // options build the same gate)
+    let gate = reports
+        .iter()
+        .find(|r| r.n_dofs > 0)
+        .map(|r| (r.n_dofs, r.element_size));
+    if let Some((n_dofs, element_size)) = gate {
+        for r in reports.iter_mut().filter(|r| r.n_dofs == 0) {
+            (r.n_dofs, r.element_size) = (n_dofs, element_size);
+        }
+    }
+    if reports.is_empty() {
+        return Ok(None);
+    }
+    Ok(Some(CoverageReport::merge(&reports, vec![])?))
+}
+
+/// `--extend`: runs the replicates the part lacks, scenario by scenario, from the first index
+/// missing to its size, then writes the merged `<part>.json` and removes the pieces.
+fn extend(a: &ValidationArgs, part: &Part) -> Result<()> {
+    let want = part.opts.n_replicates;
+    for &number in &part.opts.scenarios {
+        let pieces = pieces(&a.out, &part.name)?;
+        let present: std::collections::BTreeSet<usize> = combined(&pieces)?
+            .iter()
+            .flat_map(|r| r.scenarios.iter())
+            .filter(|s| s.name == format!("scenario {number}"))
+            .flat_map(|s| s.replicates.iter().map(|x| x.index))
+            .collect();
+        let Some(first) = (0..want).find(|i| !present.contains(i)) else {
+            continue;
+        };
+        let mut o = part.opts.clone();
+        (o.scenarios, o.first_replicate, o.n_replicates) = (vec![number], first, want - first);
+        let piece = a
+            .out
+            .join(format!("{}.extend-{}.json", part.name, pieces.len()));
+        eprintln!(
+            "{}: scenario {number}, replicates {first}..{want} into {}",
+            part.name,
+            piece.display()
+        );
+        let report = crate::coverage::study(&o, Some(&piece))?;
+        bamudi::data::write_atomic(&piece, report.to_json()?.as_bytes())?;
+        let _ = std::fs::remove_file(crate::coverage::log_path(&piece));
+    }
+    let pieces = pieces(&a.out, &part.name)?;
+    let merged = combined(&pieces)?.context("no piece to merge")?;
+    for s in &merged.scenarios {
+        if s.replicates.len() < want {
+            bail!(
+                "{}: {} has {} of {want} replicates after the extension",
+                part.name,
+                s.name,
+                s.replicates.len()
+            );
+        }
+    }
+    let json = &pieces[0];
+    bamudi::data::write_atomic(json, merged.to_json()?.as_bytes())?;
+    for p in &pieces[1..] {
+        let _ = std::fs::remove_file(p);
+    }
+    for p in &pieces {
+        let _ = std::fs::remove_file(crate::coverage::log_path(p));
+    }
+    eprintln!(
+        "{}: {} written from {} pieces",
+        part.name,
+        json.display(),
+        pieces.len()
+    );
     Ok(())
 }
 

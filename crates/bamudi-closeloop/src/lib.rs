@@ -63,6 +63,7 @@ mod events;
 mod features;
 mod nuisance;
 mod record;
+mod regime;
 mod search;
 mod sensor;
 pub(crate) mod stats;
@@ -83,6 +84,7 @@ pub use error::{CloseLoopError, Result};
 pub use events::{Alarm, AlarmWindow, EventScan, GaugeScale};
 pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperature_range};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
+pub use regime::CalibratedAfterStep;
 pub use sensor::{
     AttributionTest, CalibrationRows, SensorAction, SensorFinding, SensorKind, SensorReport,
     WithheldAlarm,
@@ -338,6 +340,12 @@ pub struct CloseLoopReport {
     /// propagated.
     #[serde(default)]
     pub theta_after_effect_sd: Option<f64>,
+    /// The gap's change dated inside the calibration window, and the loop run again on the
+    /// window's rows after it (everything above is that run's, but for the first
+    /// calibration's figures: `*_before`, `checks_before`, `noise_sd_estimate`,
+    /// `n_calibration`); `None` when the loop ran once.
+    #[serde(default)]
+    pub after_step: Option<CalibratedAfterStep>,
     /// The changes seen on several gauges together after the calibration window, each tested
     /// for a library effect from its day on beside the gap and one sensor, and the effects
     /// added (`None` when no such change was seen, or `sensor.onset_effects` is off).
@@ -396,6 +404,32 @@ pub fn close_loop_with(
     features::check_covariate_values(rec, &cfg.column_units)?;
     let started = std::time::Instant::now();
     let w = Windows::of(rec, cfg)?;
+    let first = run_on(rec, calibrator, cfg, library, &w)?;
+    let mut out = match regime::rows_after_step(&first.report, rec, &w.cal) {
+        Some((day, rows, step)) => {
+            let again = Windows {
+                cal: rows,
+                step: Some(step),
+                ..w
+            };
+            let out = run_on(rec, calibrator, cfg, library, &again)?;
+            regime::merged(first, out, day)
+        }
+        None => first,
+    };
+    out.report.wall_time_s = started.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// The loop on the windows `w`: the first calibration on `w.cal`, the sensor pass, selection
+/// and the post-selection pass.
+fn run_on(
+    rec: &MeasuredRecord,
+    calibrator: &dyn Calibrator,
+    cfg: &CloseLoopConfig,
+    library: &[Arc<dyn Effect>],
+    w: &Windows,
+) -> Result<CloseLoopOutcome> {
     let feats = Features::new(rec, cfg.load.as_ref(), &cfg.column_units);
     let lp = Loop {
         calibrator,
@@ -414,6 +448,7 @@ pub fn close_loop_with(
             .load
             .as_ref()
             .and_then(|l| LoadNuisance::new(&rec.x, l, &w.cal)),
+        step: w.step,
     };
     let (model, mean, var) = lp.calibrate(lp.y)?;
     let mut before = Before::of(&lp, model.theta_summary(), &mean, &var);
@@ -445,15 +480,18 @@ pub fn close_loop_with(
         conclusion,
         pre,
     };
-    let mut out = outcome(&lp, rec, run, library)?;
-    out.report.wall_time_s = started.elapsed().as_secs_f64();
-    Ok(out)
+    outcome(&lp, rec, run, library)
 }
 
 /// The record's rows in time order: the calibration window, the validation window (cut into
-/// rolling-origin folds) and the final test window that selection never sees.
+/// rolling-origin folds) and the final test window that selection never sees. The loop run
+/// again after a change of the gap inside the calibration window calibrates on the window's
+/// rows after it ([`regime`]): `cal` then starts later, and effects are fitted from its first
+/// row.
 struct Windows {
     cal: Vec<usize>,
+    /// The gap's step when the loop runs again after it ([`Loop::step`]).
+    step: Option<f64>,
     validation: Vec<usize>,
     selection: Vec<usize>,
     test: Vec<usize>,
@@ -484,6 +522,7 @@ impl Windows {
         let origin = |j: usize| n_cal + (j * (n_sel - n_cal)) / k;
         Ok(Self {
             cal: (0..n_cal).collect(),
+            step: None,
             validation: (n_cal..n_sel).collect(),
             selection: (0..n_sel).collect(),
             test: (n_sel..n).collect(),
@@ -867,14 +906,21 @@ fn track_theta(
 /// The track's `θ` now is taken when a parameter trend was accepted, or when the track's change
 /// alarm stands (after the sensor pass's guard): the user is told the gap changed, so the gap
 /// reported must be the one after the change, not the calibration's from before it.
-fn theta_after(st: &State, track: Option<&ThetaTrack>) -> (ThetaSummary, String, bool) {
+///
+/// When the alarm dates the step the loop calibrated after ([`regime`]), the calibration's
+/// value is the gap after the change and is kept.
+fn theta_after(
+    st: &State,
+    track: Option<&ThetaTrack>,
+    calibrated_after: bool,
+) -> (ThetaSummary, String, bool) {
     match track {
         Some(t) if st.model_fixed() => (
             t.now,
             "the parameter at the end of the record from its track over the whole record (Kalman filter at the last window)".to_string(),
             true,
         ),
-        Some(t) if t.alarm.is_some() && t.now.mean.is_finite() => (
+        Some(t) if t.alarm.is_some() && !calibrated_after && t.now.mean.is_finite() => (
             t.now,
             "the parameter at the end of the record from its track: the track's change alarm stands, so the calibration's value (from before the change) is no longer the gap now".to_string(),
             true,
@@ -899,7 +945,12 @@ struct TheGap {
 /// a calibration's (the track's gap after a change would make the change look like the
 /// corrections' doing).
 fn the_gap(lp: &Loop<'_>, rec: &MeasuredRecord, post: &correct::PostPass) -> Result<TheGap> {
-    let (theta, basis, from_track) = theta_after(&post.st, post.track.as_ref());
+    let after = post
+        .track
+        .as_ref()
+        .and_then(|t| t.alarm.as_ref())
+        .is_some_and(|a| regime::calibrated_after(lp.cal, rec, a));
+    let (theta, basis, from_track) = theta_after(&post.st, post.track.as_ref(), after);
     let (theta_after, effect_sd) = match from_track {
         true => (theta, None),
         false => correct::propagate(&lp.with_y(&post.y), rec, post, theta)?,
@@ -957,7 +1008,7 @@ fn window_fields(lp: &Loop<'_>, rec: &MeasuredRecord) -> WindowFields {
     WindowFields {
         n_validation: lp.val.len(),
         n_test: lp.test.len(),
-        split_day: day(lp.cal.len()),
+        split_day: day(lp.cal.last().map_or(0, |&i| i + 1)),
         test_start_day: lp.test.first().map(|&i| day(i)),
         selection_origin_days: lp.folds.iter().map(|&(o, _)| day(o)).collect(),
         error_window: match lp.test.is_empty() {
@@ -1044,6 +1095,7 @@ fn outcome(
         sensor: sensor_report,
         theta_after_effect_sd: effect_sd,
         onset,
+        after_step: None,
     };
     Ok(CloseLoopOutcome {
         report,

@@ -75,6 +75,12 @@ pub(super) struct Loop<'a> {
     pub(super) gauges: &'a [String],
     pub(super) cfg: &'a CloseLoopConfig,
     pub(super) nuisance: Option<LoadNuisance>,
+    /// The gap's step (parameter units, after minus before) when the loop runs again on the
+    /// calibration window's rows after a step inside it ([`crate::regime`]): every calibration
+    /// predicts the rows before its own at its gap less the step, the gap the first run's
+    /// track saw there, so that what the sensor pass and the scans read there is the gauges'
+    /// news and not the step. `None` on the first run.
+    pub(super) step: Option<f64>,
 }
 
 /// What one step's search decided: the new state with the accepted effect, or nothing.
@@ -100,7 +106,15 @@ impl Loop<'_> {
             gauges: self.gauges,
             cfg: self.cfg,
             nuisance: self.nuisance.clone(),
+            step: self.step,
         }
+    }
+
+    /// The rows effects are fitted on at a fold's `origin`: from the calibration window's first
+    /// row (the record's first, unless the loop runs again after a change of the gap inside
+    /// the window) to the origin.
+    fn before(&self, origin: usize) -> Vec<usize> {
+        (self.cal.first().copied().unwrap_or(0)..origin).collect()
     }
 
     /// The same loop calibrating on `rows` of the calibration window only.
@@ -116,7 +130,15 @@ impl Loop<'_> {
             &select_rows(self.x, self.fit_rows),
             &select_rows(y_adj, self.fit_rows),
         )?;
-        let (mean, var) = model.predict(self.x)?;
+        let (mut mean, var) = model.predict(self.x)?;
+        if let (Some(step), Some(&c0)) = (self.step, self.cal.first())
+            && c0 > 0
+        {
+            let before: Vec<usize> = (0..c0).collect();
+            let gap = model.theta_summary().mean - step;
+            let at = model.predict_at_theta(&select_rows(self.x, &before), &vec![gap; c0])?;
+            mean.rows_mut(0, c0).copy_from(&at);
+        }
         Ok((Arc::from(model), mean, var))
     }
 
@@ -298,7 +320,7 @@ impl Loop<'_> {
                 .folds
                 .iter()
                 .zip(fold_r)
-                .map(|(&(o, _), r)| r - n.fit(r, &prefix(o)))
+                .map(|(&(o, _), r)| r - n.fit(r, &self.before(o)))
                 .collect();
             mse_rows(&self.cv_of(&left), self.val)
         });
@@ -349,7 +371,7 @@ impl Loop<'_> {
         let mut first = None;
         let mut left = vec![];
         for (k, (&(origin, _), r)) in self.folds.iter().zip(fold_r).enumerate() {
-            let rows = prefix(origin);
+            let rows = self.before(origin);
             let ctx = self.context_on(st, &rows);
             match nuisance::fit_jointly(effect, &ctx, r, nu)? {
                 Some(j) => {
@@ -378,7 +400,7 @@ impl Loop<'_> {
             out.push(match (k, st.effects.is_empty()) {
                 (_, true) => self.residual(st)?,
                 (0, false) => self.residual_at_first_origin(st)?,
-                _ => self.refit(st, &prefix(origin), false)?.0,
+                _ => self.refit(st, &self.before(origin), false)?.0,
             });
         }
         Ok(out)
@@ -572,11 +594,6 @@ impl Loop<'_> {
     pub(super) fn effect_sum(&self, st: &State) -> Result<DMatrix<f64>> {
         Ok(sum_terms(&self.contributions(st)?, self.y.shape()))
     }
-}
-
-/// Rows `0..end`: everything before an origin.
-fn prefix(end: usize) -> Vec<usize> {
-    (0..end).collect()
 }
 
 /// `terms` added in order to a zero matrix of `shape`.

@@ -353,14 +353,7 @@ pub fn record_with(
     let mut csv = format!("time,h_up,h_down,air_temp_f,{}\n", names.join(","));
     for i in 0..n {
         let t = i as f64;
-        let h_down = 150.0 + 30.0 * (t / 300.0).sin();
-        let phase = (t % 8.0) / 8.0;
-        let h_up = h_down
-            + if phase < 0.5 {
-                380.0 * (2.0 * phase)
-            } else {
-                380.0 * (2.0 - 2.0 * phase)
-            };
+        let (h_up, h_down) = toy_levels(t);
         let temp = 50.0 + 10.0 * (t * std::f64::consts::TAU / 24.0).sin() + 5.0 * (t / 168.0).sin();
         let s = gate.strain(h_up, h_down, 90.0);
         let row: Vec<String> = (0..g)
@@ -374,6 +367,18 @@ pub fn record_with(
     let name_refs: Vec<&str> = names.iter().map(String::as_str).collect();
     let cfg = IngestConfig::new(&["h_up", "h_down"], &name_refs);
     super::parse_csv(&csv, "simulated", &cfg)
+}
+
+/// The water levels (in) of [`record_with`]'s row at hour `t`: `(h_up, h_down)`.
+pub fn toy_levels(t: f64) -> (f64, f64) {
+    let h_down = 150.0 + 30.0 * (t / 300.0).sin();
+    let phase = (t % 8.0) / 8.0;
+    let head = if phase < 0.5 {
+        380.0 * (2.0 * phase)
+    } else {
+        380.0 * (2.0 - 2.0 * phase)
+    };
+    (h_down + head, h_down)
 }
 
 /// The gate-like model's load: the head `h_up − h_down`, paired with `h_down`, active above

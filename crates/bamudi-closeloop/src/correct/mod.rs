@@ -1079,6 +1079,13 @@ fn gap_alarm_guard(
         let Some(alarm) = post.track.as_ref().and_then(|t| t.alarm.clone()) else {
             break;
         };
+        if crate::regime::calibrated_after(lp.cal, rec, &alarm) {
+            log::info!(
+                "gap alarm on day {:.2}: the step the loop calibrated after; it stands",
+                alarm.day
+            );
+            break;
+        }
         let from = rec
             .time_h
             .iter()
@@ -1324,7 +1331,7 @@ pub(super) fn theta_without(
     let corrected = post
         .findings
         .iter()
-        .any(|f| f.from_row < lp.cal.len() || f.kind == SensorKind::Gain);
+        .any(|f| f.from_row < cal_end(lp) || f.kind == SensorKind::Gain);
     if post.findings.is_empty() || post.st.model_fixed() {
         return Ok(None);
     }

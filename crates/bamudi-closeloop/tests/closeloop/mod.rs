@@ -7,7 +7,7 @@ mod features;
 mod ingest;
 mod sensor;
 
-use bamudi_closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_load};
+use bamudi_closeloop::testing::{GridCalibrator, ToyGate, record_with, toy_levels, toy_load};
 use bamudi_closeloop::{
     CloseLoopConfig, CloseLoopOutcome, Effect, FitContext, Fitted, LinearTerm, close_loop,
     close_loop_with, effects,
@@ -232,6 +232,51 @@ fn a_step_early_in_the_validation_window_is_fitted_on_an_as_built_gate() {
         .unwrap_or_else(|| panic!("no jump among {:?}", r.effects));
     let day = jump.parameters[1].values[3];
     assert!((day - 700.0 / 24.0).abs() < 0.1, "jump day {day}");
+}
+
+/// A gap that opens from 90 to 100 in on day 5, inside the calibration window (27 of 45
+/// days). The first calibration reads both gaps as one; the loop must calibrate again on the
+/// window's rows after the step, report the gap after it with an interval that holds it, keep
+/// the error window at the noise, and keep the first run's answer beside it.
+#[test]
+fn a_gap_step_inside_the_calibration_window_is_calibrated_after() {
+    let gate = ToyGate::default();
+    let opened = |t: f64, g: usize| {
+        let (h_up, h_down) = toy_levels(t);
+        match t >= 120.0 {
+            true => gate.strain(h_up, h_down, 100.0)[g] - gate.strain(h_up, h_down, 90.0)[g],
+            false => 0.0,
+        }
+    };
+    let out = run(8, opened);
+    let r = &out.report;
+    let a = r
+        .after_step
+        .as_ref()
+        .unwrap_or_else(|| panic!("not calibrated after the step: {}", r.conclusion));
+    // the correction's step is one row's choice: half a day is 12 rows either side
+    assert!((a.step_day - 5.0).abs() < 0.5, "step day {}", a.step_day);
+    let t = &r.theta_after;
+    assert!(t.ci95.0 <= 100.0 && 100.0 <= t.ci95.1, "gap after {t:?}");
+    // 1.5 x the noise (1 microstrain), as the other error bounds here
+    assert!(
+        r.heldout_rmse_total_after < 1.5,
+        "{}",
+        r.heldout_rmse_total_after
+    );
+    assert!(
+        r.conclusion.contains("calibrated again"),
+        "{}",
+        r.conclusion
+    );
+    // the gap now is the calibration's on the ~530 rows after the step, not the track's
+    // random-walk level after a step (on seed 8: 100.05 ± 0.09 against 100.48 ± 0.95); half
+    // the track's sd leaves room for other seeds
+    assert!(
+        t.sd < 0.5 * a.theta_whole_window.sd,
+        "{t:?} against {:?}",
+        a.theta_whole_window
+    );
 }
 
 /// A report part as JSON, to compare parts by value.
