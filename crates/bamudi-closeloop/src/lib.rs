@@ -405,15 +405,18 @@ pub fn close_loop_with(
     let started = std::time::Instant::now();
     let w = Windows::of(rec, cfg)?;
     let first = run_on(rec, calibrator, cfg, library, &w)?;
-    let mut out = match regime::rows_after_step(&first.report, rec, &w.cal) {
-        Some((day, rows, step)) => {
+    let mut out = match regime::step_in_window(&first.report, rec, &w.cal) {
+        Some(s) => {
             let again = Windows {
-                cal: rows,
-                step: Some(step),
+                cal: s.rows.clone(),
+                step: Some(s.size),
                 ..w
             };
             let out = run_on(rec, calibrator, cfg, library, &again)?;
-            regime::merged(first, out, day)
+            match s.flat_first || s.second_holds_one_gap(&out.report) {
+                true => regime::merged(first, out, s.day),
+                false => first,
+            }
         }
         None => first,
     };

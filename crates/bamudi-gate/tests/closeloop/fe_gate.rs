@@ -677,29 +677,58 @@ fn fe_gate_a_gain_the_first_calibration_learnt_is_dated_from_its_day() {
 #[test]
 #[ignore = "the panel's hourly record at full size, run twice: about a minute, outside CI's time"]
 fn fe_gate_a_gap_step_inside_the_window_is_calibrated_after() {
+    let out = run_gap_step(1000, 5.0, 110.0);
+    assert_calibrated_after(&out, 5.0, 110.0);
+}
+
+/// The panel's seed 1004 with the gap stepping from 90 to 110 in on day 30, six days before the
+/// calibration window's end (the panel's `gap-step`, large, middle). The first calibration
+/// reads the new gap through a discrepancy fitted to both: its track swung between 96 and 112
+/// in over the window's last six days, so its level did not stay put after the step and the
+/// loop ran once (error 8.51x the noise, gap 114.8 ± 5.0 in). The run calibrated after the
+/// step is now judged by its own track. The same bounds as the step from day 5 above. A
+/// design record of that rule, as seed 1003's 8-in step from day 30 (the held-out figures are
+/// in docs/closeloop.md).
+#[test]
+#[ignore = "the panel's hourly record at full size, run twice: about two minutes, outside CI's time"]
+fn fe_gate_a_late_gap_step_whose_first_track_swings_is_calibrated_after() {
+    let out = run_gap_step(1004, 30.0, 110.0);
+    assert_calibrated_after(&out, 30.0, 110.0);
+}
+
+/// The panel's record of `seed` with the gap stepping from 90 in to `to` on day `day`: each row
+/// from then on gets the strain difference of the contact solved at the two gaps.
+fn run_gap_step(seed: u64, day: f64, to: f64) -> CloseLoopOutcome {
     let c = contact();
-    let out = run_panel_record_with(1000, "panel seed 1000, gap 90 -> 110 from day 5", |d| {
-        for i in (0..d.len()).filter(|&i| d.time_h[i] / 24.0 >= 5.0) {
+    let label = format!("panel seed {seed}, gap 90 -> {to} from day {day}");
+    run_panel_record_with(seed, &label, |d| {
+        for i in (0..d.len()).filter(|&i| d.time_h[i] / 24.0 >= day) {
             let (hu, hd) = (d.x[(i, 0)], d.x[(i, 1)]);
             let strain = |gap: f64| {
                 let sol = c.solve(hu, hd, gap).unwrap();
                 c.gate().strain(&sol.forces, hu, hd)
             };
-            let (s1, s0) = (strain(110.0), strain(90.0));
+            let (s1, s0) = (strain(to), strain(90.0));
             for g in 0..d.y.ncols() {
                 d.y[(i, g)] += s1[g] - s0[g];
             }
         }
-    });
+    })
+}
+
+/// The loop calibrated again after the step of `day`: the gap within its interval and within
+/// 0.3 in of `to`, the test window within 1.5x the noise (the panel's bound), and the gap's
+/// alarm standing.
+fn assert_calibrated_after(out: &CloseLoopOutcome, day: f64, to: f64) {
     let r = &out.report;
     let a = r
         .after_step
         .as_ref()
         .unwrap_or_else(|| panic!("not calibrated after the step: {}", r.conclusion));
-    assert!((a.step_day - 5.0).abs() <= 1.0, "step day {}", a.step_day);
+    assert!((a.step_day - day).abs() <= 1.0, "step day {}", a.step_day);
     let t = &r.theta_after;
-    assert!(t.ci95.0 <= 110.0 && 110.0 <= t.ci95.1, "{t:?}");
-    assert!((t.mean - 110.0).abs() <= 0.3, "{t:?}");
+    assert!(t.ci95.0 <= to && to <= t.ci95.1, "{t:?}");
+    assert!((t.mean - to).abs() <= 0.3, "{t:?}");
     let noise = r.noise_sd_estimate;
     assert!(
         r.heldout_rmse_total_after <= 1.5 * noise,
