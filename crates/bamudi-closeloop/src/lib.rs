@@ -413,7 +413,7 @@ pub fn close_loop_with(
                 ..w
             };
             let out = run_on(rec, calibrator, cfg, library, &again)?;
-            match s.flat_first || s.second_holds_one_gap(&out.report) {
+            match s.first_holds_one_gap(&first.report) || s.second_holds_one_gap(&out.report) {
                 true => regime::merged(first, out, s.day),
                 false => first,
             }

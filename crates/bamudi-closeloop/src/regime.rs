@@ -54,13 +54,11 @@ pub(crate) struct StepInWindow {
     pub size: f64,
     /// Day of the calibration window's last row.
     end: f64,
-    /// Whether the first run's track holds one gap over those rows ([`one_gap_after`]).
-    pub flat_first: bool,
 }
 
 impl StepInWindow {
     /// Whether the first run's track holds one gap over the window's rows after the step.
-    fn first_holds_one_gap(&self, report: &CloseLoopReport) -> bool {
+    pub fn first_holds_one_gap(&self, report: &CloseLoopReport) -> bool {
         report
             .theta_track
             .as_ref()
@@ -105,15 +103,12 @@ pub(crate) fn step_in_window(
     if rows.len() < MIN_COMPLETE_ROWS || rows.len() >= cal.len() {
         return None;
     }
-    let mut s = StepInWindow {
+    Some(StepInWindow {
         day,
         rows,
         size: after - before,
         end,
-        flat_first: false,
-    };
-    s.flat_first = s.first_holds_one_gap(report);
-    Some(s)
+    })
 }
 
 /// Share of the step's size by which the track's level may move between the first window
