@@ -179,8 +179,7 @@ impl Calibration {
         let tolerances = self
             .cal
             .module3()
-            .marginal
-            .as_ref()
+            .marginal()
             .map(|m| m.tolerances.clone())
             .unwrap_or_default();
         serde_json::to_string(&tolerances).map_err(to_py)

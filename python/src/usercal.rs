@@ -316,7 +316,7 @@ impl ModelCalibration {
                 (t, "grid")
             }
         };
-        let (rho, rho_kind) = match &m3.marginal {
+        let (rho, rho_kind) = match m3.marginal() {
             Some(fit) => {
                 let sd: Vec<f64> = m3.posterior.sd().iter().map(|s| s.max(1e-300)).collect();
                 let (lo, hi) = fit.rho_prior;
@@ -423,8 +423,7 @@ impl ModelCalibration {
     fn rho_posterior(&self) -> Option<(f64, f64)> {
         self.cal
             .module3()
-            .marginal
-            .as_ref()
+            .marginal()
             .map(|f| (f.rho_mean, f.rho_sd))
     }
     /// Measurement-noise sd σ_ε (output units).

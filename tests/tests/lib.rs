@@ -406,7 +406,7 @@ fn a_declared_build_tolerance_keeps_the_interval_on_a_softer_beam() {
         let cal = calibrate(&declared, &exps, &cfg(k as u64)).unwrap();
         let (lo, hi) = cal.module3().posterior.ci95()[0];
         covered += usize::from(lo <= theta && theta <= hi);
-        let tol = &cal.module3().marginal.as_ref().unwrap().tolerances[0];
+        let tol = &cal.module3().marginal().unwrap().tolerances[0];
         assert!(
             (tol.mean + 1.5).abs() < 0.5 && tol.sd < 0.5,
             "θ* {theta}: EI's deviation {} ± {} sd, truth −1.5",

@@ -401,7 +401,7 @@ impl CalibratedModel for CalibratedGate {
     /// Occam penalty), which two data sets cannot be compared by: `None`.
     fn log_evidence(&self) -> Option<f64> {
         let m3 = self.cal.module3();
-        m3.marginal.as_ref().and(m3.posterior.log_evidence())
+        m3.marginal().and(m3.posterior.log_evidence())
     }
 
     /// The discrepancy `δ(x)` (GPs over the load inputs) absorbs load-shaped residuals.

@@ -507,15 +507,17 @@ impl Calibration {
     }
     /// The coefficient GPs Module 4 uses (the conditional mode's refit, or Module 2's).
     pub fn coefficient_gps(&self) -> &CoefficientGps {
-        self.module3.refit_gps.as_ref().unwrap_or(&self.module2.gps)
+        self.module3
+            .conditional()
+            .and_then(|c| c.refit_gps.as_ref())
+            .unwrap_or(&self.module2.gps)
     }
     /// The coefficient estimates behind those GPs: the conditional mode's posterior-averaged
     /// `E_θ[α̂(θ)]`, or Module 2's `α̂` (Eq. 32), `N_e x K`.
     pub fn alpha_hat(&self) -> &DMatrix<f64> {
         self.module3
-            .alpha_hat
-            .as_ref()
-            .unwrap_or(&self.module2.alpha_hat)
+            .conditional()
+            .map_or(&self.module2.alpha_hat, |c| &c.alpha_hat)
     }
 
     /// Means and latent variances of the discrepancy coefficients at the rows of `x` (two
@@ -524,7 +526,7 @@ impl Calibration {
     pub(crate) fn alpha_moments(&self, x: &DMatrix<f64>) -> Result<(DMatrix<f64>, DMatrix<f64>)> {
         let gps = self.coefficient_gps();
         let (mut mean, var) = gps.predict(x)?;
-        if let Some(w) = &self.module3.alpha_correction {
+        if let Some(w) = self.module3.conditional().map(|c| &c.alpha_correction) {
             for (k, shift) in self.alpha_shifts(gps, w)?.iter().enumerate() {
                 let shift = shift
                     .apply(&gps.models[k], x)
@@ -573,7 +575,7 @@ impl Calibration {
         if let Some(s) = self.marginal_state.get() {
             return Ok(s.clone());
         }
-        let fit = self.module3.marginal.as_ref().ok_or_else(|| {
+        let fit = self.module3.marginal().ok_or_else(|| {
             BamudiError::Calibration("no marginal-mode fit in this calibration".into())
         })?;
         let sigma2 = self.module3.sigma_eps.powi(2);
@@ -635,7 +637,7 @@ impl Calibration {
         let declared: Vec<&str> = model.tolerances.iter().map(|t| t.name.as_str()).collect();
         let integrated: Vec<&str> = self
             .module3()
-            .marginal
+            .marginal()
             .iter()
             .flat_map(|m| m.tolerances.iter().map(|t| t.name.as_str()))
             .collect();
@@ -700,6 +702,16 @@ impl Calibration {
 
     /// Consistency of a loaded calibration (sizes, a positive `σ_ε`).
     fn validate(&self) -> std::result::Result<(), String> {
+        let (fitted, configured) = (
+            self.module3.mode.coefficient_mode(),
+            self.config.coefficients,
+        );
+        if fitted != configured {
+            return Err(format!(
+                "module3 holds the fit of the coefficient mode {fitted:?}, but the \
+                 configuration's coefficients are {configured:?}"
+            ));
+        }
         let s = self.module3.sigma_eps;
         if !(s.is_finite() && s > 0.0) {
             return Err(format!("sigma_eps must be a positive number, got {s}"));
@@ -720,7 +732,7 @@ impl Calibration {
     /// Every marginal node's columns `c` and `a` have one entry per observation (`n_s`);
     /// a calibration saved before the nodes kept them has none.
     fn validate_marginal_nodes(&self, n_s: usize) -> std::result::Result<(), String> {
-        let Some(fit) = &self.module3.marginal else {
+        let Some(fit) = self.module3.marginal() else {
             return Ok(());
         };
         for (j, node) in fit.nodes.iter().enumerate() {

@@ -665,6 +665,10 @@ impl CalibrationParams {
     /// assert!(bamudi::CalibrationParams::default().check().is_ok());
     /// let e = bamudi::CalibrationParams::default().sigma_eps(Some(-1.0)).check().unwrap_err();
     /// assert!(e.to_string().contains("sigma_eps"));
+    /// // a mode's settings cannot be given to another mode
+    /// let text = "coefficients = \"prior_marginal\"\n[marginal]\nlevel_variance = 1e4";
+    /// let e = bamudi::CalibrationConfig::from_toml_str(text).unwrap_err();
+    /// assert!(e.to_string().contains("marginal"), "{e}");
     /// ```
     pub fn check(self) -> Result<CalibrationConfig> {
         self.sampling.validate()?;
@@ -690,6 +694,18 @@ impl CalibrationParams {
             return Err(BamudiError::config(
                 "sigma_eps",
                 format!("must be > 0, got {s}"),
+            ));
+        }
+        if self.coefficients != CoefficientMode::Marginal
+            && self.marginal != MarginalPrior::default()
+        {
+            return Err(BamudiError::config(
+                "marginal",
+                format!(
+                    "the [marginal] settings belong to coefficients = \"marginal\", but the \
+                     coefficients are {:?}: remove them, or choose the marginal mode",
+                    self.coefficients
+                ),
             ));
         }
         let c = self.marginal.level_variance;

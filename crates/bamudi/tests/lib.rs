@@ -661,6 +661,108 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
     assert!(err.to_string().contains("estimator differs"), "{err}");
 }
 
+/// Each coefficient mode's fit is its own variant of `ModeFit`, and a saved calibration keeps
+/// the flat layout of `module3` it always had (the same keys in the same order, `null` where a
+/// mode has none): saved, read and saved again, the text is the same, the variant is the
+/// mode's, and a file mixing two modes' fits, or whose fit is not its configuration's mode,
+/// is refused with the key named.
+#[test]
+fn each_mode_saves_and_reads_its_own_fit() {
+    use bamudi::posterior::ModeFit;
+    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let (x, y) = beam_records_with_faulty_gauges(30, 11);
+    let names = (
+        model.unobservable.input_names(),
+        model.observable.output_names(),
+    );
+    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    let layout = [
+        "rho_star",
+        "rho_profile",
+        "refit_gps",
+        "alpha_hat",
+        "alpha_correction",
+        "sigma_eps",
+        "sigma_eps_estimated",
+        "covariance",
+        "posterior",
+        "posterior_no_discrepancy",
+        "no_discrepancy",
+        "marginal",
+        "averaged",
+    ];
+    let mut saved = Vec::new();
+    for mode in [
+        CoefficientMode::PriorMarginal,
+        CoefficientMode::ConditionalOnTheta,
+        CoefficientMode::Marginal,
+    ] {
+        let cfg = CalibrationParams::default()
+            .estimator(EstimatorParams::ExactLinear)
+            .theta_grid_points(41)
+            .coefficients(mode)
+            .check()
+            .unwrap();
+        let cal = Calibrate::new(&cfg).run(&model, &exps).unwrap();
+        let m3 = cal.module3();
+        assert_eq!(m3.mode.coefficient_mode(), mode);
+        match (&m3.mode, mode) {
+            (ModeFit::PriorMarginal, CoefficientMode::PriorMarginal)
+            | (ModeFit::ConditionalOnTheta(_), CoefficientMode::ConditionalOnTheta)
+            | (ModeFit::Marginal(_), CoefficientMode::Marginal) => {}
+            (fit, _) => panic!("{mode:?} fitted {:?}", fit.coefficient_mode()),
+        }
+        let text = cal.to_json_string().unwrap();
+        let value: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let keys: Vec<&str> = value["module3"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        let mut sorted = layout.to_vec();
+        sorted.sort_unstable();
+        // serde_json's map is ordered by key here: compare the key sets; the order is the
+        // writer's field order, checked on the text below
+        assert_eq!(keys, sorted, "{mode:?}");
+        // each key found after the one before it, from module3's start
+        let mut at = text.find("\"module3\":{").unwrap();
+        for k in layout {
+            let next = text[at..].find(&format!("\"{k}\":"));
+            at += next.unwrap_or_else(|| panic!("{mode:?}: {k} out of order"));
+        }
+        let again = bamudi::Calibration::from_json_str(&text, "saved").unwrap();
+        assert_eq!(again.module3().mode.coefficient_mode(), mode);
+        assert_eq!(again.to_json_string().unwrap(), text, "{mode:?}");
+        saved.push(value);
+    }
+    let refused = |v: &serde_json::Value| {
+        bamudi::Calibration::from_json_str(&v.to_string(), "edited")
+            .unwrap_err()
+            .to_string()
+    };
+    // the marginal mode's file given the conditional mode's correction too
+    let mut mixed = saved[2].clone();
+    mixed["module3"]["alpha_correction"] = saved[1]["module3"]["alpha_correction"].clone();
+    let e = refused(&mixed);
+    assert!(
+        e.contains("alpha_correction") && e.contains("one mode"),
+        "{e}"
+    );
+    // the conditional mode's correction without its profile
+    let mut partial = saved[1].clone();
+    partial["module3"]["rho_profile"] = serde_json::Value::Null;
+    let e = refused(&partial);
+    assert!(e.contains("module3.rho_profile"), "{e}");
+    // the paper's mode's file configured as the marginal mode
+    let mut other = saved[0].clone();
+    other["config"]["coefficients"] = serde_json::json!("marginal");
+    let e = refused(&other);
+    assert!(e.contains("coefficient mode"), "{e}");
+}
+
 /// `Predictor::response_moments` (and `output_moments`) are the response (outputs) band's mean
 /// and the variance whose square root is its `sd`, bit for bit, in each
 /// coefficient mode (it is the same mixture without the quantile searches), at loads inside
@@ -763,7 +865,7 @@ fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it()
     // no discrepancy in the data
     let weighed = calibrate(&clean, DiscrepancyPresence::Weighed);
     let assumed = calibrate(&clean, DiscrepancyPresence::Assumed);
-    let avg = weighed.module3().averaged.as_ref().expect("weighed");
+    let avg = weighed.module3().averaged().expect("weighed");
     let p0 = avg.probability_without;
     // Under no discrepancy, p0 < 1/2 needs the discrepancy model to gain more than its penalty
     // (½ ln N_s per hyper-parameter, 2 of them: ln 280 = 5.6 nats) by fitting noise: for two
@@ -835,12 +937,7 @@ fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it()
     // the beam's discrepancy in the data: the answer is the discrepancy model's, bit for bit
     let weighed = calibrate(&with_delta, DiscrepancyPresence::Weighed);
     let assumed = calibrate(&with_delta, DiscrepancyPresence::Assumed);
-    let p0 = weighed
-        .module3()
-        .averaged
-        .as_ref()
-        .unwrap()
-        .probability_without;
+    let p0 = weighed.module3().averaged().unwrap().probability_without;
     assert!(
         p0 < bamudi::predict::NEGLIGIBLE_MODEL_WEIGHT,
         "P(no discrepancy) = {p0}"
@@ -850,7 +947,7 @@ fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it()
         assumed.predictor(&model).unwrap(),
     );
     assert!(
-        assumed.module3().averaged.is_none(),
+        assumed.module3().averaged().is_none(),
         "assumed: nothing weighed"
     );
     for xi in loads {

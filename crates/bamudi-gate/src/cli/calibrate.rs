@@ -110,7 +110,7 @@ fn print_summary(cal: &Calibration, dir: &Path) {
         ci.0,
         ci.1
     );
-    if let Some(a) = &cal.module3().averaged {
+    if let Some(a) = cal.module3().averaged() {
         println!(
             "discrepancy: probability {:.3} that the gauges hold none the model lacks (evidence \
              with {:.1}, without {:.1} nats, {:.1} charged for its fitted hyper-parameters)",
@@ -127,7 +127,12 @@ fn print_summary(cal: &Calibration, dir: &Path) {
             "configured"
         }
     );
-    for t in cal.module3().marginal.iter().flat_map(|m| &m.tolerances) {
+    for t in cal
+        .module3()
+        .marginal()
+        .into_iter()
+        .flat_map(|m| &m.tolerances)
+    {
         println!(
             "tolerance {}: {:+.2} ± {:.2} sd (prior N(0, 1), integrated out)",
             t.name, t.mean, t.sd

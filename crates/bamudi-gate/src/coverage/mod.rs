@@ -813,7 +813,11 @@ impl Setup<'_> {
             .theta_grid_points(self.opts.theta_grid_points)
             .sampling(sampling)
             .coefficients(mode)
-            .marginal(marginal)
+            .marginal(match mode {
+                // the marginal mode's settings; the other modes take none
+                bamudi::CoefficientMode::Marginal => marginal,
+                _ => bamudi::MarginalPrior::default(),
+            })
             .sigma_eps(sigma_eps)
             .seed(derive_seed(self.opts.seed, 7 + r as u64))
     }
@@ -914,7 +918,7 @@ impl Setup<'_> {
             theta_mean: s.mean,
             theta_sd: s.sd,
             rho: cal.rho_star(),
-            rho_sd: cal.module3().marginal.as_ref().map(|m| m.rho_sd),
+            rho_sd: cal.module3().marginal().map(|m| m.rho_sd),
             rho_true: Some(truth.rho),
             band_normal: tally.inside[0] as f64 / tally.n[0].max(1) as f64,
             band_tangential: tally.inside[1] as f64 / tally.n[1].max(1) as f64,
@@ -924,12 +928,11 @@ impl Setup<'_> {
             band_halfwidth_median: Some(tally.median_halfwidth()),
             baselines: full.then(|| errors.baselines()),
             delta: full.then(|| errors.delta()),
-            rho_projection: cal.module3().marginal.as_ref().map(|m| m.rho_projection),
+            rho_projection: cal.module3().marginal().map(|m| m.rho_projection),
             rho_projection_true: None,
             hyper: cal
                 .module3()
-                .marginal
-                .as_ref()
+                .marginal()
                 .map(|m| [m.amplitude, m.length_scale_factor, cal.sigma_eps()]),
             probability_without: cal.module3().probability_without(),
             ranks,
@@ -947,7 +950,7 @@ impl Setup<'_> {
         x: [f64; 2],
         seed: u64,
     ) -> Result<Ranks> {
-        let rho = cal.module3().marginal.as_ref().map(|m| {
+        let rho = cal.module3().marginal().map(|m| {
             let w: f64 = m.nodes.iter().map(|n| n.weight).sum::<f64>().max(1e-300);
             m.nodes
                 .iter()

@@ -429,26 +429,31 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
         .training_size(opts.training_size)
         .theta_grid_points(opts.theta_grid_points)
         .sampling(sampling.noise_sd(opts.gauge_noise_sd))
-        .marginal(opts.marginal_prior.clone())
         .seed(opts.seed)
 }
 
 /// Re-runs Module 3 of a finished calibration with another coefficient mode (same estimator,
 /// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::rerun_module3`]) and scores it
-/// like the main run; returns the scores and the variant's calibration.
+/// like the main run; returns the scores and the variant's calibration. `marginal` is the
+/// coefficients' prior of the marginal mode (the other modes take none).
 fn run_variant(
     s: &ScenarioRun<'_>,
     cal: &Calibration,
     main_scores: &Scores,
-    mode: CoefficientMode,
+    (mode, marginal): (CoefficientMode, &bamudi::MarginalPrior),
     observer: &dyn bamudi::observe::Observer,
 ) -> Result<(ConditionalResult, Calibration)> {
     let t = Instant::now();
+    let marginal = match mode {
+        CoefficientMode::Marginal => marginal.clone(),
+        _ => bamudi::MarginalPrior::default(),
+    };
     let cfg: CalibrationConfig = cal
         .config()
         .clone()
         .into_params()
         .coefficients(mode)
+        .marginal(marginal)
         .check()?;
     let cond = Calibrate::new(&cfg)
         .observer(observer)
@@ -465,10 +470,10 @@ fn run_variant(
         },
         sigma_eps: cond.sigma_eps(),
         seconds,
-        rho_sd: cond.module3().marginal.as_ref().map(|m| m.rho_sd),
+        rho_sd: cond.module3().marginal().map(|m| m.rho_sd),
         discrepancy: scores.discrepancy,
         baselines: Some(scores.baselines),
-        rho_projection: cond.module3().marginal.as_ref().map(|m| m.rho_projection),
+        rho_projection: cond.module3().marginal().map(|m| m.rho_projection),
     };
     Ok((result, cond))
 }
@@ -567,7 +572,7 @@ pub fn run_scenario(
     let scores = score(&s.model, &cal, &s.scenario, contact, &s.new_x)?;
     clock.lap("scores of the paper's Module 3");
     let variant = |on: bool, mode| match on {
-        true => run_variant(&s, &cal, &scores, mode, observer).map(Some),
+        true => run_variant(&s, &cal, &scores, (mode, &opts.marginal_prior), observer).map(Some),
         false => Ok(None),
     };
     let conditional = variant(opts.conditional, CoefficientMode::ConditionalOnTheta)?.map(|v| v.0);

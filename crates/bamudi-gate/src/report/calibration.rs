@@ -139,13 +139,13 @@ impl Results {
                 "rho_star": cal.rho_star(),
                 "objective_at_star": m2.rho.objective_at_star,
                 "curve": curve,
-                "rho_projection": m3.marginal.as_ref().map(|m| m.rho_projection),
+                "rho_projection": m3.marginal().map(|m| m.rho_projection),
             }),
             sigma_eps: serde_json::json!({ "value": m3.sigma_eps, "estimated": m3.sigma_eps_estimated }),
             theta: serde_json::json!({
                 "prior_bounds": prior_bounds,
                 "with_discrepancy": PosteriorSummary::new(&m3.posterior),
-                "model_average": m3.averaged.as_ref().map(|a| serde_json::json!({
+                "model_average": m3.averaged().map(|a| serde_json::json!({
                     "probability_without": a.probability_without,
                     "log_evidence_with": a.log_evidence_with,
                     "log_evidence_without": a.log_evidence_without,
@@ -165,8 +165,7 @@ impl Results {
             timings_s: cal.timings().clone(),
             inputs: with_version(inputs),
             tolerances: m3
-                .marginal
-                .as_ref()
+                .marginal()
                 .map(|m| m.tolerances.clone())
                 .unwrap_or_default(),
             adequacy: cal.adequacy().cloned(),
@@ -227,7 +226,7 @@ pub fn write_report(
 fn plot_rho(cal: &Calibration, path: &Path) -> Result<()> {
     let rho = &cal.module2().rho;
     let module2_star = rho.rho_star;
-    let (title, pts) = match &cal.module3().marginal {
+    let (title, pts) = match cal.module3().marginal() {
         Some(m) => (
             "Posterior of the force scale ρ (marginal mode)",
             rho_mixture(m),
@@ -484,7 +483,7 @@ fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
         cal.rho_star(),
         m2.rho.objective_at_star
     );
-    if let Some(m) = &m3.marginal {
+    if let Some(m) = m3.marginal() {
         s += &rho_caveat(m);
         s += &tolerances_markdown(&m.tolerances);
     }
@@ -517,7 +516,7 @@ fn report_markdown(cal: &Calibration, inputs: &ReportInputs) -> String {
             );
         }
     }
-    if let Some(a) = &m3.averaged {
+    if let Some(a) = m3.averaged() {
         s += &format!(
             "\nIs there a discrepancy at all? The models with and without one weighed by their \
              evidence (ln Z {:.1} and {:.1} nats, {:.1} charged for the discrepancy's fitted \

@@ -631,7 +631,7 @@ pub fn results_json(
 fn final_tolerances(out: &CloseLoopOutcome) -> Vec<ToleranceEstimate> {
     let any: &dyn std::any::Any = out.model.as_ref();
     any.downcast_ref::<crate::calibrator::CalibratedGate>()
-        .and_then(|g| g.calibration().module3().marginal.as_ref())
+        .and_then(|g| g.calibration().module3().marginal())
         .map(|m| m.tolerances.clone())
         .unwrap_or_default()
 }

@@ -373,7 +373,7 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let Some(fit) = cal.module3.marginal.as_ref() else {
+    let Some(fit) = cal.module3.marginal() else {
         return Ok(AdequacyReport::not_assessed(
             "the checks use the marginal mode's covariance; this calibration's coefficient \
              mode has none",
@@ -421,10 +421,10 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let fit =
-        cal.module3.marginal.as_ref().ok_or_else(|| {
-            BamudiError::Calibration("adequacy checks need the marginal fit".into())
-        })?;
+    let fit = cal
+        .module3
+        .marginal()
+        .ok_or_else(|| BamudiError::Calibration("adequacy checks need the marginal fit".into()))?;
     let (n_e, n_o) = (p.exps.len(), p.exps.y.ncols());
     let flat = |m: &DMatrix<f64>| DVector::from_iterator(n_e * n_o, m.transpose().iter().copied());
     let theta = fit.support_theta.clone();

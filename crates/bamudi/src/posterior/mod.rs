@@ -14,6 +14,7 @@ pub(crate) mod grid;
 pub(crate) mod likelihood;
 pub(crate) mod marginal;
 pub(crate) mod mcmc;
+pub(crate) mod mode;
 pub(crate) mod no_discrepancy;
 pub(crate) mod rho;
 pub(crate) mod theta;
@@ -25,11 +26,11 @@ pub use conditional::RhoProfile;
 pub(crate) use evaluate::{ThetaLikelihood, ThetaResiduals};
 pub use likelihood::FactorReport;
 pub use marginal::{CoefficientPrior, MarginalFit, MarginalNode, ToleranceEstimate};
+pub use mode::ConditionalFit;
 pub use no_discrepancy::{NoDiscrepancyFit, NoDiscrepancyNode};
 pub use theta::{GridPosterior, GridWarning, SupportPolicy, ThetaPosterior, ThetaSummary};
 
 use crate::error::Result;
-use crate::surrogate::gps::CoefficientGps;
 use crate::surrogate::training::XContext;
 use crate::surrogate::{Module2, Problem};
 use coefficients::{CoefficientStrategy, Coefficients};
@@ -38,22 +39,15 @@ use likelihood::{FactoredCovariance, assemble_covariance};
 use mlmodel::{LinearObservableModel, UnobservableModel};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
 /// The result of Module 3.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
+#[serde(try_from = "mode::Read")]
 pub struct Module3 {
-    /// `ρ*` used in Modules 3-4 (the conditional mode's profile value, or Eq. 30's).
+    /// `ρ*` used in Modules 3-4 (the conditional mode's profile value, Eq. 30's, or the
+    /// marginal mode's posterior mean).
     pub rho_star: f64,
-    /// The conditional mode's profile search for `ρ` (the Eq.-30 value is kept inside it).
-    pub rho_profile: Option<RhoProfile>,
-    /// The GPs refitted by the conditional mode, when they replace Module 2's.
-    pub refit_gps: Option<CoefficientGps>,
-    /// The conditional mode's posterior-averaged GP targets `E_θ[α̂(θ)]` (`N_e x K`).
-    pub alpha_hat: Option<DMatrix<f64>>,
-    /// The conditional mode's smoother weights (`N_e x K`) of `E_θ[α̂(θ)] − α̂`: the GP mean at
-    /// `x` becomes `μ_k(x) + Σ_k(x, X) w_k` (`ConditionalCoefficients::weights`).
-    pub alpha_correction: Option<DMatrix<f64>>,
     /// `σ_ε` used (output units).
     pub sigma_eps: f64,
     /// Whether `σ_ε` was estimated rather than configured.
@@ -69,25 +63,65 @@ pub struct Module3 {
     /// its predictions (baseline (b); `None` when
     /// [`no_discrepancy_fit`](crate::CalibrationParams::no_discrepancy_fit) is off, and in
     /// files written before it existed).
-    #[serde(default)]
     pub no_discrepancy: Option<NoDiscrepancyFit>,
-    /// The marginal mode's fit (coefficient priors, amplitude, `ρ`'s posterior, the support
-    /// points Module 4 uses).
-    #[serde(default)]
-    pub marginal: Option<marginal::MarginalFit>,
+    /// What the coefficient mode fitted besides `θ`'s posterior.
+    pub mode: ModeFit,
+}
+
+/// What a coefficient mode ([`CoefficientMode`](crate::CoefficientMode)) fitted besides
+/// `θ`'s posterior: each mode's own result, one variant per mode.
+#[derive(Debug, Clone)]
+pub enum ModeFit {
+    /// The paper's Module 3: Module 2's coefficient GPs as they are; nothing more is fitted.
+    PriorMarginal,
+    /// The coefficients conditioned on `θ`: the `ρ` profile, the refitted GPs and the
+    /// posterior-averaged coefficient targets.
+    ConditionalOnTheta(Box<ConditionalFit>),
+    /// The coefficients integrated out.
+    Marginal(Box<MarginalModeFit>),
+}
+
+/// What the marginal mode ([`CoefficientMode::Marginal`](crate::CoefficientMode::Marginal))
+/// fitted.
+#[derive(Debug, Clone)]
+pub struct MarginalModeFit {
+    /// The coefficient priors, amplitude, `ρ`'s posterior and the support points Module 4 uses.
+    pub fit: MarginalFit,
     /// The models with and without a discrepancy weighed by their evidence, for Module 4's
     /// predictions (`average`; `Some` with
     /// [`DiscrepancyPresence::Weighed`](crate::params::DiscrepancyPresence::Weighed) on a grid
-    /// posterior in the marginal mode). The gap's posterior stays [`Self::posterior`].
-    #[serde(default)]
-    pub averaged: Option<average::ModelAverage>,
+    /// posterior). The gap's posterior stays [`Module3::posterior`].
+    pub averaged: Option<ModelAverage>,
 }
 
 impl Module3 {
     /// `P(M_0 | y)`, the posterior probability of no discrepancy, when the two models were
     /// weighed ([`Self::averaged`]); `None` otherwise.
     pub fn probability_without(&self) -> Option<f64> {
-        self.averaged.as_ref().map(|a| a.probability_without)
+        self.averaged().map(|a| a.probability_without)
+    }
+    /// The marginal mode's fit (`None` in the other modes).
+    pub fn marginal(&self) -> Option<&MarginalFit> {
+        match &self.mode {
+            ModeFit::Marginal(m) => Some(&m.fit),
+            _ => None,
+        }
+    }
+    /// The models with and without a discrepancy weighed by their evidence (the marginal mode
+    /// with [`DiscrepancyPresence::Weighed`](crate::params::DiscrepancyPresence::Weighed);
+    /// `None` otherwise).
+    pub fn averaged(&self) -> Option<&ModelAverage> {
+        match &self.mode {
+            ModeFit::Marginal(m) => m.averaged.as_ref(),
+            _ => None,
+        }
+    }
+    /// The conditional mode's fit (`None` in the other modes).
+    pub fn conditional(&self) -> Option<&ConditionalFit> {
+        match &self.mode {
+            ModeFit::ConditionalOnTheta(c) => Some(c),
+            _ => None,
+        }
     }
 }
 
@@ -166,20 +200,26 @@ where
     };
     drop(lik);
     drop(cc);
-    let (alpha_hat, alpha_correction) = match correction {
-        None => (None, None),
-        Some(d) => {
+    let mode = match (correction, c.profile) {
+        (None, _) => ModeFit::PriorMarginal,
+        (Some(d), Some(rho_profile)) => {
             let w = ConditionalCoefficients::weights(&d, &c.moments.noise_var);
             c.alpha_hat += &d;
-            (Some(c.alpha_hat), Some(w))
+            ModeFit::ConditionalOnTheta(Box::new(ConditionalFit {
+                rho_profile,
+                refit_gps: c.refit,
+                alpha_hat: c.alpha_hat,
+                alpha_correction: w,
+            }))
+        }
+        (Some(_), None) => {
+            return Err(crate::error::BamudiError::Calibration(
+                "the conditional coefficients came without their rho profile".into(),
+            ));
         }
     };
     Ok(Module3 {
         rho_star: c.rho_star,
-        rho_profile: c.profile,
-        refit_gps: c.refit,
-        alpha_hat,
-        alpha_correction,
         sigma_eps,
         sigma_eps_estimated,
         covariance: factor.report(),
@@ -189,8 +229,7 @@ where
         },
         posterior: post,
         posterior_no_discrepancy: post_without,
-        marginal: None,
-        averaged: None,
+        mode,
     })
 }
 

@@ -12,7 +12,7 @@
 //!
 //! with `μ_α`, `Σ_α` the coefficient GPs' latent means and variances (independent GPs, so
 //! `Σ_α` is diagonal), shifted in the conditional mode by the posterior-averaged coefficient
-//! change ([`crate::posterior::Module3::alpha_correction`]).
+//! change ([`crate::posterior::ConditionalFit::alpha_correction`]).
 //!
 //! With declared build tolerances (marginal mode; `nuisance`) the
 //! deviations `η` enter every prediction as they entered the data: each component's mean gains
@@ -131,7 +131,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
 
     fn set_support(&mut self, policy: &SupportPolicy) -> Result<()> {
         let m3 = self.cal.module3();
-        match &m3.marginal {
+        match m3.marginal() {
             None => self.support = m3.posterior.support(policy),
             Some(fit) => {
                 // one test of "tolerances declared" for every entry point below
@@ -241,7 +241,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
     /// mixtures (`average`): `0` unless the two models were weighed, and
     /// below [`NEGLIGIBLE_MODEL_WEIGHT`].
     pub fn probability_without(&self) -> f64 {
-        match &self.cal.module3().averaged {
+        match self.cal.module3().averaged() {
             Some(a) if a.probability_without >= NEGLIGIBLE_MODEL_WEIGHT => a.probability_without,
             _ => 0.0,
         }

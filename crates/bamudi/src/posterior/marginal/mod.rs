@@ -84,7 +84,7 @@ use super::likelihood::FactorReport;
 use super::no_discrepancy::{self, NoDiscrepancyFit};
 use super::rho::{ThetaTerms, truncated_moments};
 use super::theta::{SupportPolicy, ThetaPosterior};
-use super::{Module3, model_rows};
+use super::{MarginalModeFit, ModeFit, Module3, model_rows};
 use crate::error::{BamudiError, Result};
 use crate::optim::Brent;
 use crate::params::{CoefficientKernel, CoefficientScales, DiscrepancyPresence, MarginalPrior};
@@ -577,10 +577,6 @@ where
     };
     Ok(Module3 {
         rho_star: rho_mean,
-        rho_profile: None,
-        refit_gps: None,
-        alpha_hat: None,
-        alpha_correction: None,
         sigma_eps: lik.cov.sigma2.sqrt(),
         sigma_eps_estimated: p.cfg.sigma_eps.is_none(),
         covariance: FactorReport {
@@ -594,24 +590,26 @@ where
         },
         posterior: post,
         posterior_no_discrepancy: post_without,
-        marginal: Some(MarginalFit {
-            priors: fitted.priors,
-            amplitude: lik.cov.s,
-            length_scale_factor: fitted.length_factor,
-            rho_prior: p.cfg.sampling.rho_range,
-            rho_mean,
-            rho_sd,
-            rho_projection,
-            rank: lik.cov.lr.rank(),
-            amplitudes: amps,
-            support: fitted.support,
-            support_theta: theta_hat,
-            orthonormal_basis: p.cfg.marginal.scales == CoefficientScales::Isotropic,
-            nodes,
-            tolerances,
-            tolerance_columns: lik.cov.tolerance_columns().cloned(),
-        }),
-        averaged,
+        mode: ModeFit::Marginal(Box::new(MarginalModeFit {
+            fit: MarginalFit {
+                priors: fitted.priors,
+                amplitude: lik.cov.s,
+                length_scale_factor: fitted.length_factor,
+                rho_prior: p.cfg.sampling.rho_range,
+                rho_mean,
+                rho_sd,
+                rho_projection,
+                rank: lik.cov.lr.rank(),
+                amplitudes: amps,
+                support: fitted.support,
+                support_theta: theta_hat,
+                orthonormal_basis: p.cfg.marginal.scales == CoefficientScales::Isotropic,
+                nodes,
+                tolerances,
+                tolerance_columns: lik.cov.tolerance_columns().cloned(),
+            },
+            averaged,
+        })),
     })
 }
 
