@@ -10,7 +10,7 @@ use crate::adequacy::{self, AdequacyReport, Attribution, Check};
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
 use crate::observe::{Event, Observer, Silent, Stage};
-use crate::params::CalibrationConfig;
+use crate::params::{CalibrationConfig, CalibrationParams, CoefficientMode, MarginalPrior};
 use crate::posterior::{self, Method, Module3, marginal};
 use crate::surrogate::estimator::FittedEstimator;
 use crate::surrogate::gps::CoefficientGps;
@@ -61,10 +61,24 @@ struct ModelSignature {
     n_coefficients: usize,
 }
 
+/// A saved calibration's configuration, checked again. The marginal mode's settings in a
+/// calibration of another mode were never read; files written before such settings were
+/// refused, or under other defaults, hold them, and they are dropped rather than refused.
+fn saved_config<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<CalibrationConfig, D::Error> {
+    let mut p = CalibrationParams::deserialize(d)?;
+    if p.coefficients != CoefficientMode::Marginal {
+        p.marginal = MarginalPrior::default();
+    }
+    p.check().map_err(serde::de::Error::custom)
+}
+
 /// The result of a BA-MUDI calibration (serialisable: [`save`](Self::save) /
 /// [`load`](Self::load)).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Calibration {
+    #[serde(deserialize_with = "saved_config")]
     config: CalibrationConfig,
     signature: ModelSignature,
     x_experiments: DMatrix<f64>,
@@ -708,8 +722,8 @@ impl Calibration {
         );
         if fitted != configured {
             return Err(format!(
-                "module3 holds the fit of the coefficient mode {fitted:?}, but the \
-                 configuration's coefficients are {configured:?}"
+                "config.coefficients is {configured:?}, but module3 holds the fit of the \
+                 coefficient mode {fitted:?}"
             ));
         }
         let s = self.module3.sigma_eps;

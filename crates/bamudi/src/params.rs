@@ -668,7 +668,7 @@ impl CalibrationParams {
     /// // a mode's settings cannot be given to another mode
     /// let text = "coefficients = \"prior_marginal\"\n[marginal]\nlevel_variance = 1e4";
     /// let e = bamudi::CalibrationConfig::from_toml_str(text).unwrap_err();
-    /// assert!(e.to_string().contains("marginal"), "{e}");
+    /// assert!(e.to_string().contains("`marginal`"), "{e}");
     /// ```
     pub fn check(self) -> Result<CalibrationConfig> {
         self.sampling.validate()?;

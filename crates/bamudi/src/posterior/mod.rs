@@ -201,7 +201,12 @@ where
     drop(lik);
     drop(cc);
     let mode = match (correction, c.profile) {
-        (None, _) => ModeFit::PriorMarginal,
+        (None, None) => ModeFit::PriorMarginal,
+        (None, Some(_)) => {
+            return Err(crate::error::BamudiError::Calibration(
+                "a rho profile came without the conditional coefficients".into(),
+            ));
+        }
         (Some(d), Some(rho_profile)) => {
             let w = ConditionalCoefficients::weights(&d, &c.moments.noise_var);
             c.alpha_hat += &d;
