@@ -597,6 +597,22 @@ fn beam_records_with_faulty_gauges(n: usize, seed: u64) -> (DMatrix<f64>, DMatri
     (x, y)
 }
 
+/// The beam (prior 5-25, 4 terms) and 30 of those records (seed 11) as experiments.
+fn beam_with_faulty_records() -> (
+    mlmodel::MultiLevelModel<beam_app::BeamReaction, beam_app::BeamStrain>,
+    Experiments,
+) {
+    use mlmodel::{ObservableModel, UnobservableModel};
+    let model = beam_app::beam_model((5.0, 25.0), 4);
+    let (x, y) = beam_records_with_faulty_gauges(30, 11);
+    let names = (
+        model.unobservable.input_names(),
+        model.observable.output_names(),
+    );
+    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    (model, exps)
+}
+
 /// The model-row memo changes no number of a calibration: the beam calibrated (marginal
 /// mode, exact estimator) without a memo, with one, and again with the now-filled memo (every
 /// row a hit) gives the same Module 2 and Module 3, value for value; so does
@@ -670,14 +686,7 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
 fn each_mode_saves_and_reads_its_own_fit() {
     use bamudi::posterior::ModeFit;
     use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
-    use mlmodel::{ObservableModel, UnobservableModel};
-    let model = beam_app::beam_model((5.0, 25.0), 4);
-    let (x, y) = beam_records_with_faulty_gauges(30, 11);
-    let names = (
-        model.unobservable.input_names(),
-        model.observable.output_names(),
-    );
-    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    let (model, exps) = beam_with_faulty_records();
     let layout = [
         "rho_star",
         "rho_profile",
@@ -805,14 +814,7 @@ fn top_level_keys(text: &str, opening: &str) -> Vec<String> {
 #[test]
 fn response_moments_are_the_bands_moments() {
     use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
-    use mlmodel::{ObservableModel, UnobservableModel};
-    let model = beam_app::beam_model((5.0, 25.0), 4);
-    let (x, y) = beam_records_with_faulty_gauges(30, 11);
-    let names = (
-        model.unobservable.input_names(),
-        model.observable.output_names(),
-    );
-    let exps = Experiments::new(names.0, names.1, x, y).unwrap();
+    let (model, exps) = beam_with_faulty_records();
     for mode in [
         CoefficientMode::PriorMarginal,
         CoefficientMode::ConditionalOnTheta,
