@@ -613,6 +613,31 @@ fn beam_with_faulty_records() -> (
     (model, exps)
 }
 
+/// The beam calibrated in each coefficient mode (exact estimator, 41 grid points).
+fn in_each_mode(
+    model: &mlmodel::MultiLevelModel<beam_app::BeamReaction, beam_app::BeamStrain>,
+    exps: &Experiments,
+) -> Vec<(bamudi::CoefficientMode, bamudi::Calibration)> {
+    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
+    let modes = [
+        CoefficientMode::PriorMarginal,
+        CoefficientMode::ConditionalOnTheta,
+        CoefficientMode::Marginal,
+    ];
+    modes
+        .into_iter()
+        .map(|mode| {
+            let cfg = CalibrationParams::default()
+                .estimator(EstimatorParams::ExactLinear)
+                .theta_grid_points(41)
+                .coefficients(mode)
+                .check()
+                .unwrap();
+            (mode, Calibrate::new(&cfg).run(model, exps).unwrap())
+        })
+        .collect()
+}
+
 /// The model-row memo changes no number of a calibration: the beam calibrated (marginal
 /// mode, exact estimator) without a memo, with one, and again with the now-filled memo (every
 /// row a hit) gives the same Module 2 and Module 3, value for value; so does
@@ -684,8 +709,8 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
 /// is refused with the key named.
 #[test]
 fn each_mode_saves_and_reads_its_own_fit() {
+    use bamudi::CoefficientMode;
     use bamudi::posterior::ModeFit;
-    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
     let (model, exps) = beam_with_faulty_records();
     let layout = [
         "rho_star",
@@ -703,18 +728,7 @@ fn each_mode_saves_and_reads_its_own_fit() {
         "averaged",
     ];
     let mut saved = Vec::new();
-    for mode in [
-        CoefficientMode::PriorMarginal,
-        CoefficientMode::ConditionalOnTheta,
-        CoefficientMode::Marginal,
-    ] {
-        let cfg = CalibrationParams::default()
-            .estimator(EstimatorParams::ExactLinear)
-            .theta_grid_points(41)
-            .coefficients(mode)
-            .check()
-            .unwrap();
-        let cal = Calibrate::new(&cfg).run(&model, &exps).unwrap();
+    for (mode, cal) in in_each_mode(&model, &exps) {
         let m3 = cal.module3();
         assert_eq!(m3.mode.coefficient_mode(), mode);
         match (&m3.mode, mode) {
@@ -813,20 +827,8 @@ fn top_level_keys(text: &str, opening: &str) -> Vec<String> {
 /// faulty gauges.
 #[test]
 fn response_moments_are_the_bands_moments() {
-    use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
     let (model, exps) = beam_with_faulty_records();
-    for mode in [
-        CoefficientMode::PriorMarginal,
-        CoefficientMode::ConditionalOnTheta,
-        CoefficientMode::Marginal,
-    ] {
-        let cfg = CalibrationParams::default()
-            .estimator(EstimatorParams::ExactLinear)
-            .theta_grid_points(41)
-            .coefficients(mode)
-            .check()
-            .unwrap();
-        let cal = Calibrate::new(&cfg).run(&model, &exps).unwrap();
+    for (mode, cal) in in_each_mode(&model, &exps) {
         let predictor = cal.predictor(&model).unwrap();
         for xi in [[1500.0, 20.0], [8000.0, 90.0], [12_000.0, 5.0]] {
             let xi = &xi[..];
