@@ -7,7 +7,7 @@ use crate::progress::Callback;
 use crate::{invalid, to_py};
 use bamudi::posterior::ThetaPosterior;
 use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
-use bamudi::{Calibrate, CalibrationConfig, CalibrationParams, CoefficientMode, Experiments};
+use bamudi::{Calibrate, CalibrationConfig, CalibrationParams, Experiments};
 use mlmodel::{LinearObservableModel, PredictionModel};
 use nalgebra::DMatrix;
 use numerics::random::{derive_seed, standard_normal};
@@ -434,11 +434,7 @@ impl ModelCalibration {
     /// The coefficient mode (`marginal`, `conditional_on_theta`, `prior_marginal`).
     #[getter]
     fn mode(&self) -> &'static str {
-        match self.cal.config().coefficients {
-            CoefficientMode::Marginal => "marginal",
-            CoefficientMode::ConditionalOnTheta => "conditional_on_theta",
-            CoefficientMode::PriorMarginal => "prior_marginal",
-        }
+        self.cal.config().coefficients.kind().name()
     }
     /// The model's description (names, coordinates, A, prior, discrepancy) as JSON text.
     fn description_json(&self) -> PyResult<String> {

@@ -562,7 +562,15 @@ mod tests {
             let text = calibration_toml((81.0, 105.0), level, None, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
-            assert_eq!(spec.calibration.marginal.level_variance, want, "{text}");
+            assert_eq!(
+                spec.calibration
+                    .coefficients
+                    .marginal_prior()
+                    .unwrap()
+                    .level_variance,
+                want,
+                "{text}"
+            );
         }
     }
 
@@ -631,7 +639,15 @@ mod tests {
             let text = calibration_toml((81.0, 105.0), Some(1e3), range, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.calibration.sampling.rho_range, want, "{text}");
-            assert_eq!(spec.calibration.marginal.level_variance, 1e3, "{text}");
+            assert_eq!(
+                spec.calibration
+                    .coefficients
+                    .marginal_prior()
+                    .unwrap()
+                    .level_variance,
+                1e3,
+                "{text}"
+            );
         }
     }
 

@@ -3,7 +3,7 @@
 
 use crate::plots::{line_plot, series};
 use anyhow::{Context, Result, bail};
-use bamudi::CoefficientMode;
+use bamudi::ModeKind;
 use bamudi::surrogate::LstmSettings;
 use bamudi_gate::coverage::{self, CoverageOptions, CoverageReport, LEVELS, RANK_BINS};
 use bamudi_gate::report::plot::CATEGORICAL;
@@ -202,7 +202,7 @@ fn options(a: &CoverageArgs) -> Result<CoverageOptions> {
     Ok(o)
 }
 
-fn parse_mode(m: &str) -> Result<CoefficientMode> {
+fn parse_mode(m: &str) -> Result<ModeKind> {
     serde_json::from_value(serde_json::Value::String(m.trim().into())).with_context(|| {
         format!("--modes {m}: expected marginal, conditional_on_theta or prior_marginal")
     })

@@ -92,7 +92,7 @@ pub fn scenario_plots(
     let predictor = cal.predictor(model)?;
     let resp = predictor.response(&x)?;
     let before = prior_mean_response(model, &x)?;
-    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
+    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients.kind());
     for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         let r = c * nu..(c + 1) * nu;
         line_plot(
@@ -178,7 +178,7 @@ fn fatigue_plot(p: &ScenarioPlots<'_>) -> Result<()> {
     let x = fatigue::condition(p.number);
     let seed = 700 + p.number as u64;
     let d = fatigue::damage_along_quoin(p.model, p.cal, &p.scenario, contact, x, seed)?;
-    let mode = bamudi_gate::coverage::mode_label(p.cal.config().coefficients);
+    let mode = bamudi_gate::coverage::mode_label(p.cal.config().coefficients.kind());
     line_plot(
         &p.dir.join("fatigue_damage.svg"),
         &format!(
@@ -236,7 +236,7 @@ fn normal_force_error(p: &ScenarioPlots<'_>) -> Result<()> {
         &format!(
             "{}, {}: normal-force RMSE over the quoin (Fig. 18)",
             res.name,
-            bamudi_gate::coverage::mode_label(cal.config().coefficients)
+            bamudi_gate::coverage::mode_label(cal.config().coefficients.kind())
         ),
         xl,
         "RMSE (lbf/in)",
@@ -255,7 +255,7 @@ fn force_history(p: &ScenarioPlots<'_>) -> Result<()> {
     let contact = model.unobservable.inner().contact();
     let h = bamudi_gate::paper::figures::force_history(model, cal, scenario, contact)?;
     let col = |k: usize, c: usize| -> Vec<f64> { h.rows.iter().map(|r| r[k][c]).collect() };
-    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients);
+    let mode = bamudi_gate::coverage::mode_label(cal.config().coefficients.kind());
     for (c, name) in [(0usize, "normal"), (1, "tangential")] {
         line_plot(
             &dir.join(format!("history_{name}.svg")),

@@ -159,7 +159,7 @@ fn parts(a: &ValidationArgs) -> Vec<Part> {
             ("none", DiscrepancyShape::None),
         ] {
             let mut o = CoverageOptions {
-                modes: vec![bamudi::CoefficientMode::Marginal],
+                modes: vec![bamudi::ModeKind::Marginal],
                 seed: PAPER_SEED,
                 n_replicates: a.paper_replicates,
                 threads: a.threads,

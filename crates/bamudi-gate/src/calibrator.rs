@@ -91,7 +91,7 @@ impl GateCalibrator {
         };
         let config = CalibrationParams::default()
             .estimator(EstimatorParams::ExactLinear)
-            .coefficients(CoefficientMode::Marginal)
+            .coefficients(CoefficientMode::default())
             .theta_grid_points(241)
             .check()?;
         Ok(Self {
@@ -119,7 +119,7 @@ impl GateCalibrator {
     /// sd.
     pub fn tolerances(mut self, specs: &[ToleranceSpec], drawing: &GateConfig) -> Result<Self> {
         let label = "close-loop tolerances";
-        check_tolerance_specs(specs, self.config.coefficients, label)?;
+        check_tolerance_specs(specs, self.config.coefficients.kind(), label)?;
         check_tolerance_keys(specs, drawing, label)?;
         let built = build_tolerances(specs, Some(drawing), label)?;
         let model = Arc::try_unwrap(self.model).map_err(|_| {

@@ -188,7 +188,11 @@ impl CalibrateSpec {
                 self.discrepancy_terms
             )));
         }
-        check_tolerance_specs(&self.tolerances, self.calibration.coefficients, label)?;
+        check_tolerance_specs(
+            &self.tolerances,
+            self.calibration.coefficients.kind(),
+            label,
+        )?;
         if let Err(e) = self.calibration.clone().check() {
             return Err(GateAppError::Invalid(format!(
                 "{label}: in table [calibration]: {e}"

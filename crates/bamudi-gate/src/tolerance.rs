@@ -25,7 +25,7 @@ pub struct ToleranceSpec {
 /// `label` and `tolerances[i]`.
 pub fn check_tolerance_specs(
     specs: &[ToleranceSpec],
-    mode: bamudi::CoefficientMode,
+    mode: bamudi::ModeKind,
     label: &str,
 ) -> Result<()> {
     for (i, t) in specs.iter().enumerate() {
@@ -46,7 +46,7 @@ pub fn check_tolerance_specs(
             t.key
         )));
     }
-    if !specs.is_empty() && mode != bamudi::CoefficientMode::Marginal {
+    if !specs.is_empty() && mode != bamudi::ModeKind::Marginal {
         return Err(GateAppError::Invalid(format!(
             "{label}: `tolerances` are integrated only by the marginal mode; remove them or set \
              coefficients = \"marginal\" in [calibration]"

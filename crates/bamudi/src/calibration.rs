@@ -10,7 +10,7 @@ use crate::adequacy::{self, AdequacyReport, Attribution, Check};
 use crate::data::Experiments;
 use crate::error::{BamudiError, Result};
 use crate::observe::{Event, Observer, Silent, Stage};
-use crate::params::{CalibrationConfig, CalibrationParams, CoefficientMode, MarginalPrior};
+use crate::params::{CalibrationConfig, CalibrationParams, ModeKind, ParamsFile};
 use crate::posterior::{self, Method, Module3, marginal};
 use crate::surrogate::estimator::FittedEstimator;
 use crate::surrogate::gps::CoefficientGps;
@@ -67,11 +67,13 @@ struct ModelSignature {
 fn saved_config<'de, D: serde::Deserializer<'de>>(
     d: D,
 ) -> std::result::Result<CalibrationConfig, D::Error> {
-    let mut p = CalibrationParams::deserialize(d)?;
-    if p.coefficients != CoefficientMode::Marginal {
-        p.marginal = MarginalPrior::default();
+    let mut file = ParamsFile::deserialize(d)?;
+    if file.coefficients != ModeKind::Marginal {
+        file.marginal = None;
     }
-    p.check().map_err(serde::de::Error::custom)
+    CalibrationParams::try_from(file)
+        .and_then(CalibrationParams::check)
+        .map_err(serde::de::Error::custom)
 }
 
 /// The result of a BA-MUDI calibration (serialisable: [`save`](Self::save) /
@@ -366,7 +368,7 @@ impl<'a> Calibrate<'a> {
         U: UnobservableModel,
         O: LinearObservableModel,
     {
-        let m3 = match posterior::method::<U, O>(self.cfg.coefficients) {
+        let m3 = match posterior::method::<U, O>(&self.cfg.coefficients) {
             Method::Modular(strategy) => {
                 let coefs = self.stage(Stage::Coefficients, &mut t.coefficients_s, || {
                     posterior::adapt_coefficients(&p, &m2, &ctx, strategy.as_ref())
@@ -375,9 +377,9 @@ impl<'a> Calibrate<'a> {
                     posterior::posterior(&p, &m2, &ctx, strategy.as_ref(), coefs)
                 })?
             }
-            Method::Marginal => self.stage(Stage::Module3, &mut t.module3_s, || {
+            Method::Marginal(prior) => self.stage(Stage::Module3, &mut t.module3_s, || {
                 let sigma0 = marginal::initial_sigma(&p, &m2, &ctx)?;
-                marginal::posterior(&p, &m2, &ctx, sigma0)
+                marginal::posterior(&p, &m2, &ctx, sigma0, prior)
             })?,
         };
         let mut cal = Calibration {
@@ -718,7 +720,7 @@ impl Calibration {
     fn validate(&self) -> std::result::Result<(), String> {
         let (fitted, configured) = (
             self.module3.mode.coefficient_mode(),
-            self.config.coefficients,
+            self.config.coefficients.kind(),
         );
         if fitted != configured {
             return Err(format!(

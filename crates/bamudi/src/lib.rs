@@ -59,7 +59,7 @@ pub use error::{BamudiError, Result};
 pub use params::{
     AdequacyParams, CalibrationConfig, CalibrationParams, CoefficientKernel, CoefficientMode,
     CoefficientScales, DiscrepancyPresence, EstimatorParams, MarginalPrior, Marginalisation,
-    McmcConfig, RhoSearch, RidgeParams, SamplingRule,
+    McmcConfig, ModeKind, RhoSearch, RidgeParams, SamplingRule,
 };
 pub use posterior::{SupportPolicy, ThetaPosterior, ThetaSummary};
 pub use predict::{Band, DrawPaths, Predictor};

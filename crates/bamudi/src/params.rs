@@ -325,14 +325,36 @@ impl Default for McmcConfig {
     }
 }
 
-/// How Module 3 (Eq. 50) sets the discrepancy coefficients at a candidate `θ`.
+/// How Module 3 (Eq. 50) sets the discrepancy coefficients at a candidate `θ`; a mode carries
+/// its own settings (only the marginal mode has any: its prior). In TOML the mode is named by
+/// `coefficients` and the marginal mode's prior is the `[marginal]` section, which another mode
+/// refuses.
 ///
 /// ```
-/// let cfg = bamudi::CalibrationConfig::from_toml_str("coefficients = \"conditional_on_theta\"").unwrap();
-/// assert_eq!(cfg.coefficients, bamudi::CoefficientMode::ConditionalOnTheta);
+/// use bamudi::{CalibrationConfig, CoefficientMode, ModeKind};
+/// let cfg = CalibrationConfig::from_toml_str("coefficients = \"conditional_on_theta\"").unwrap();
+/// assert_eq!(cfg.coefficients, CoefficientMode::ConditionalOnTheta);
+/// let cfg = CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = 1e4").unwrap();
+/// assert_eq!(cfg.coefficients.kind(), ModeKind::Marginal);
+/// assert_eq!(cfg.coefficients.marginal_prior().unwrap().level_variance, 1e4);
+/// // the marginal mode's section beside another mode is refused, even at its defaults
+/// let text = "coefficients = \"prior_marginal\"\n[marginal]\nlevel_variance = 0";
+/// let e = CalibrationConfig::from_toml_str(text).unwrap_err();
+/// assert!(e.to_string().contains("`marginal`"), "{e}");
+/// // each mode, written and read again, is itself with its settings
+/// let prior = bamudi::MarginalPrior { level_variance: 10.0, ..Default::default() };
+/// for mode in [
+///     CoefficientMode::PriorMarginal,
+///     CoefficientMode::ConditionalOnTheta,
+///     CoefficientMode::Marginal(prior),
+/// ] {
+///     let cfg = bamudi::CalibrationParams::default().coefficients(mode.clone()).check().unwrap();
+///     let text = toml::to_string(cfg.params()).unwrap();
+///     assert_eq!(text.contains("[marginal]"), mode.kind() == ModeKind::Marginal, "{text}");
+///     assert_eq!(CalibrationConfig::from_toml_str(&text).unwrap().coefficients, mode);
+/// }
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, PartialEq)]
 pub enum CoefficientMode {
     /// The paper: `μ_α(x)` of Module 2, estimated with `θ` marginalised over its prior
     /// (Eq. 25/27), is the same at every `θ`. The coefficients then absorb the difference
@@ -350,13 +372,74 @@ pub enum CoefficientMode {
     /// prior with Module 2's kernels (the Kennedy-O'Hagan treatment), `ρ` integrated over its
     /// uniform prior, `σ_ε` and the prior's amplitude by type-II maximum likelihood; Module 4
     /// carries `θ`, `ρ` and every coefficient direction (see `marginal`).
-    /// The default: its intervals are the ones the coverage study checks.
+    /// The default (with the default prior): its intervals are the ones the coverage study
+    /// checks.
+    Marginal(MarginalPrior),
+}
+
+impl Default for CoefficientMode {
+    /// The marginal mode with the default prior.
+    fn default() -> Self {
+        Self::Marginal(MarginalPrior::default())
+    }
+}
+
+impl CoefficientMode {
+    /// The mode without its settings.
+    pub fn kind(&self) -> ModeKind {
+        match self {
+            Self::PriorMarginal => ModeKind::PriorMarginal,
+            Self::ConditionalOnTheta => ModeKind::ConditionalOnTheta,
+            Self::Marginal(_) => ModeKind::Marginal,
+        }
+    }
+
+    /// The marginal mode's prior; `None` in the other modes.
+    pub fn marginal_prior(&self) -> Option<&MarginalPrior> {
+        match self {
+            Self::Marginal(prior) => Some(prior),
+            _ => None,
+        }
+    }
+}
+
+/// A coefficient mode's name, without its settings: the TOML key `coefficients`, and what a
+/// result or a study records of the mode it ran.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModeKind {
+    /// [`CoefficientMode::PriorMarginal`] (`"prior_marginal"`).
+    PriorMarginal,
+    /// [`CoefficientMode::ConditionalOnTheta`] (`"conditional_on_theta"`).
+    ConditionalOnTheta,
+    /// [`CoefficientMode::Marginal`] (`"marginal"`; the default).
     #[default]
     Marginal,
 }
 
+impl ModeKind {
+    /// The mode with its default settings.
+    pub fn with_defaults(self) -> CoefficientMode {
+        match self {
+            Self::PriorMarginal => CoefficientMode::PriorMarginal,
+            Self::ConditionalOnTheta => CoefficientMode::ConditionalOnTheta,
+            Self::Marginal => CoefficientMode::default(),
+        }
+    }
+
+    /// The name a configuration file uses (`prior_marginal`, `conditional_on_theta`,
+    /// `marginal`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::PriorMarginal => "prior_marginal",
+            Self::ConditionalOnTheta => "conditional_on_theta",
+            Self::Marginal => "marginal",
+        }
+    }
+}
+
 /// The prior of the discrepancy coefficients in the marginal mode
-/// ([`CoefficientMode::Marginal`]; TOML section `[marginal]`).
+/// ([`CoefficientMode::Marginal`]; TOML section `[marginal]`, given only with that mode).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MarginalPrior {
@@ -374,9 +457,10 @@ pub struct MarginalPrior {
     ///
     /// ```
     /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = 1e4").unwrap();
-    /// assert_eq!(cfg.clone().into_params().marginal.level_variance, 1e4);
-    /// let default = bamudi::CalibrationConfig::from_toml_str("").unwrap().into_params();
-    /// assert_eq!(default.marginal.level_variance, bamudi::params::DEFAULT_LEVEL_VARIANCE);
+    /// assert_eq!(cfg.coefficients.marginal_prior().unwrap().level_variance, 1e4);
+    /// let default = bamudi::CalibrationConfig::from_toml_str("").unwrap();
+    /// let prior = default.coefficients.marginal_prior().unwrap();
+    /// assert_eq!(prior.level_variance, bamudi::params::DEFAULT_LEVEL_VARIANCE);
     /// assert!(bamudi::CalibrationConfig::from_toml_str("[marginal]\nlevel_variance = -1").is_err());
     /// ```
     pub level_variance: f64,
@@ -402,11 +486,43 @@ pub struct MarginalPrior {
     /// ```
     /// use bamudi::params::DiscrepancyPresence;
     /// let cfg = bamudi::CalibrationConfig::from_toml_str("[marginal]\npresence = \"assumed\"").unwrap();
-    /// assert_eq!(cfg.into_params().marginal.presence, DiscrepancyPresence::Assumed);
-    /// let default = bamudi::CalibrationConfig::from_toml_str("").unwrap().into_params();
-    /// assert_eq!(default.marginal.presence, DiscrepancyPresence::Weighed);
+    /// assert_eq!(cfg.coefficients.marginal_prior().unwrap().presence, DiscrepancyPresence::Assumed);
+    /// let default = bamudi::CalibrationConfig::from_toml_str("").unwrap();
+    /// assert_eq!(default.coefficients.marginal_prior().unwrap().presence, DiscrepancyPresence::Weighed);
     /// ```
     pub presence: DiscrepancyPresence,
+}
+
+impl MarginalPrior {
+    /// Checks the prior's values (errors name the TOML key); `sigma_eps` is the calibration's.
+    fn check(&self, sigma_eps: Option<f64>) -> Result<()> {
+        let c = self.level_variance;
+        if !(c.is_finite() && (0.0..=MAX_LEVEL_VARIANCE).contains(&c)) {
+            return Err(BamudiError::config(
+                "marginal.level_variance",
+                format!("must be in [0, {MAX_LEVEL_VARIANCE:e}], got {c}"),
+            ));
+        }
+        if let Some(f) = &self.fixed {
+            let ok = |v: f64| v.is_finite() && v > 0.0;
+            if !(ok(f.amplitude) && ok(f.length_scale_factor)) {
+                return Err(BamudiError::config(
+                    "marginal.fixed",
+                    format!(
+                        "amplitude and length_scale_factor must be finite and > 0, got {} and {}",
+                        f.amplitude, f.length_scale_factor
+                    ),
+                ));
+            }
+            if sigma_eps.is_none() {
+                return Err(BamudiError::config(
+                    "marginal.fixed",
+                    "holding the amplitude and length scales needs sigma_eps too",
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Whether Module 4's predictions assume a discrepancy ([`MarginalPrior::presence`]).
@@ -529,7 +645,7 @@ pub enum CoefficientScales {
 /// assert_eq!(back, cfg);
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+#[serde(try_from = "ParamsFile", into = "ParamsFile")]
 pub struct CalibrationParams {
     /// The coefficient estimator of Eq. 29.
     pub estimator: EstimatorParams,
@@ -549,10 +665,10 @@ pub struct CalibrationParams {
     pub sigma_eps: Option<f64>,
     /// MCMC settings (for `dim θ > 1`).
     pub mcmc: McmcConfig,
-    /// How Module 3 sets the discrepancy coefficients at each `θ` (default: marginal).
+    /// How Module 3 sets the discrepancy coefficients at each `θ`, with the mode's settings
+    /// (default: the marginal mode with the default prior; TOML `coefficients` and
+    /// `[marginal]`).
     pub coefficients: CoefficientMode,
-    /// The coefficients' prior in the marginal mode.
-    pub marginal: MarginalPrior,
     /// The adequacy checks run after Module 3.
     pub adequacy: AdequacyParams,
     /// Fit the strongest calibration without a discrepancy at its `θ` posterior's support
@@ -581,8 +697,7 @@ impl Default for CalibrationParams {
             gp_restarts: 3,
             sigma_eps: None,
             mcmc: McmcConfig::default(),
-            coefficients: CoefficientMode::Marginal,
-            marginal: MarginalPrior::default(),
+            coefficients: CoefficientMode::default(),
             adequacy: AdequacyParams::default(),
             no_discrepancy_fit: true,
             seed: 2021,
@@ -647,10 +762,9 @@ impl CalibrationParams {
         sigma_eps: Option<f64>, "Some(1.0)");
     setter!(/// Sets the MCMC settings.
         mcmc: McmcConfig, "bamudi::McmcConfig::default()");
-    setter!(/// Sets how Module 3 treats the discrepancy coefficients at each `θ`.
-        coefficients: CoefficientMode, "bamudi::CoefficientMode::ConditionalOnTheta");
-    setter!(/// Sets the coefficients' prior of the marginal mode.
-        marginal: MarginalPrior, "bamudi::MarginalPrior { scales: bamudi::CoefficientScales::PerCoefficient, ..Default::default() }");
+    setter!(/// Sets how Module 3 treats the discrepancy coefficients at each `θ`, with the
+        /// mode's settings (the marginal mode's prior).
+        coefficients: CoefficientMode, "bamudi::CoefficientMode::Marginal(bamudi::MarginalPrior { scales: bamudi::CoefficientScales::PerCoefficient, ..Default::default() })");
     setter!(/// Sets whether the baseline without discrepancy is fitted at its support points.
         no_discrepancy_fit: bool, "false");
     setter!(/// Sets the master seed.
@@ -696,42 +810,8 @@ impl CalibrationParams {
                 format!("must be > 0, got {s}"),
             ));
         }
-        if self.coefficients != CoefficientMode::Marginal
-            && self.marginal != MarginalPrior::default()
-        {
-            return Err(BamudiError::config(
-                "marginal",
-                format!(
-                    "the [marginal] settings belong to coefficients = \"marginal\", but the \
-                     coefficients are {:?}: remove them, or choose the marginal mode",
-                    self.coefficients
-                ),
-            ));
-        }
-        let c = self.marginal.level_variance;
-        if !(c.is_finite() && (0.0..=MAX_LEVEL_VARIANCE).contains(&c)) {
-            return Err(BamudiError::config(
-                "marginal.level_variance",
-                format!("must be in [0, {MAX_LEVEL_VARIANCE:e}], got {c}"),
-            ));
-        }
-        if let Some(f) = &self.marginal.fixed {
-            let ok = |v: f64| v.is_finite() && v > 0.0;
-            if !(ok(f.amplitude) && ok(f.length_scale_factor)) {
-                return Err(BamudiError::config(
-                    "marginal.fixed",
-                    format!(
-                        "amplitude and length_scale_factor must be finite and > 0, got {} and {}",
-                        f.amplitude, f.length_scale_factor
-                    ),
-                ));
-            }
-            if self.sigma_eps.is_none() {
-                return Err(BamudiError::config(
-                    "marginal.fixed",
-                    "holding the amplitude and length scales needs sigma_eps too",
-                ));
-            }
+        if let CoefficientMode::Marginal(prior) = &self.coefficients {
+            prior.check(self.sigma_eps)?;
         }
         Ok(CalibrationConfig(self))
     }
@@ -834,6 +914,98 @@ impl CalibrationConfig {
             reason: e.to_string(),
         })?;
         params.check()
+    }
+}
+
+/// [`CalibrationParams`] as a file holds it: the coefficient mode by name (`coefficients`)
+/// and the marginal mode's prior as its own section (`marginal`), which is refused beside
+/// another mode. Missing keys take their defaults.
+#[derive(Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub(crate) struct ParamsFile {
+    estimator: EstimatorParams,
+    sampling: SamplingRule,
+    training_size: usize,
+    marginalisation: Marginalisation,
+    rho: RhoSearch,
+    theta_grid_points: usize,
+    gp_restarts: usize,
+    sigma_eps: Option<f64>,
+    mcmc: McmcConfig,
+    pub(crate) coefficients: ModeKind,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) marginal: Option<MarginalPrior>,
+    adequacy: AdequacyParams,
+    no_discrepancy_fit: bool,
+    seed: u64,
+    threads: Option<usize>,
+}
+
+impl Default for ParamsFile {
+    /// The defaults of [`CalibrationParams`], the marginal section absent (a file that names
+    /// the marginal mode without it gets the default prior).
+    fn default() -> Self {
+        let mut file = Self::from(CalibrationParams::default());
+        file.marginal = None;
+        file
+    }
+}
+
+impl From<CalibrationParams> for ParamsFile {
+    fn from(p: CalibrationParams) -> Self {
+        Self {
+            coefficients: p.coefficients.kind(),
+            marginal: p.coefficients.marginal_prior().cloned(),
+            estimator: p.estimator,
+            sampling: p.sampling,
+            training_size: p.training_size,
+            marginalisation: p.marginalisation,
+            rho: p.rho,
+            theta_grid_points: p.theta_grid_points,
+            gp_restarts: p.gp_restarts,
+            sigma_eps: p.sigma_eps,
+            mcmc: p.mcmc,
+            adequacy: p.adequacy,
+            no_discrepancy_fit: p.no_discrepancy_fit,
+            seed: p.seed,
+            threads: p.threads,
+        }
+    }
+}
+
+impl TryFrom<ParamsFile> for CalibrationParams {
+    type Error = BamudiError;
+    fn try_from(f: ParamsFile) -> Result<Self> {
+        let coefficients = match (f.coefficients, f.marginal) {
+            (ModeKind::Marginal, prior) => CoefficientMode::Marginal(prior.unwrap_or_default()),
+            (kind, None) => kind.with_defaults(),
+            (kind, Some(_)) => {
+                return Err(BamudiError::config(
+                    "marginal",
+                    format!(
+                        "the [marginal] settings belong to coefficients = \"marginal\", but \
+                         the coefficients are \"{}\": remove them, or choose the marginal mode",
+                        kind.name()
+                    ),
+                ));
+            }
+        };
+        Ok(Self {
+            coefficients,
+            estimator: f.estimator,
+            sampling: f.sampling,
+            training_size: f.training_size,
+            marginalisation: f.marginalisation,
+            rho: f.rho,
+            theta_grid_points: f.theta_grid_points,
+            gp_restarts: f.gp_restarts,
+            sigma_eps: f.sigma_eps,
+            mcmc: f.mcmc,
+            adequacy: f.adequacy,
+            no_discrepancy_fit: f.no_discrepancy_fit,
+            seed: f.seed,
+            threads: f.threads,
+        })
     }
 }
 

@@ -622,7 +622,7 @@ fn in_each_mode(
     let modes = [
         CoefficientMode::PriorMarginal,
         CoefficientMode::ConditionalOnTheta,
-        CoefficientMode::Marginal,
+        CoefficientMode::default(),
     ];
     modes
         .into_iter()
@@ -630,7 +630,7 @@ fn in_each_mode(
             let cfg = CalibrationParams::default()
                 .estimator(EstimatorParams::ExactLinear)
                 .theta_grid_points(41)
-                .coefficients(mode)
+                .coefficients(mode.clone())
                 .check()
                 .unwrap();
             (mode, Calibrate::new(&cfg).run(model, exps).unwrap())
@@ -730,11 +730,11 @@ fn each_mode_saves_and_reads_its_own_fit() {
     let mut saved = Vec::new();
     for (mode, cal) in in_each_mode(&model, &exps) {
         let m3 = cal.module3();
-        assert_eq!(m3.mode.coefficient_mode(), mode);
-        match (&m3.mode, mode) {
+        assert_eq!(m3.mode.coefficient_mode(), mode.kind());
+        match (&m3.mode, &mode) {
             (ModeFit::PriorMarginal, CoefficientMode::PriorMarginal)
             | (ModeFit::ConditionalOnTheta(_), CoefficientMode::ConditionalOnTheta)
-            | (ModeFit::Marginal(_), CoefficientMode::Marginal) => {}
+            | (ModeFit::Marginal(_), CoefficientMode::Marginal(_)) => {}
             (fit, _) => panic!("{mode:?} fitted {:?}", fit.coefficient_mode()),
         }
         let text = cal.to_json_string().unwrap();
@@ -743,7 +743,10 @@ fn each_mode_saves_and_reads_its_own_fit() {
         // ordered by key, so they are read off the text)
         assert_eq!(top_level_keys(&text, "\"module3\":{"), layout, "{mode:?}");
         let again = bamudi::Calibration::from_json_str(&text, "saved").unwrap();
-        assert_eq!(again.module3().mode.coefficient_mode(), mode);
+        assert_eq!(again.module3().mode.coefficient_mode(), mode.kind());
+        // the configuration holds the marginal mode's prior in that mode only
+        let prior = value["config"].get("marginal");
+        assert_eq!(prior.is_some(), mode.marginal_prior().is_some(), "{mode:?}");
         assert_eq!(again.to_json_string().unwrap(), text, "{mode:?}");
         saved.push(value);
     }
@@ -775,7 +778,7 @@ fn each_mode_saves_and_reads_its_own_fit() {
     let mut older = saved[0].clone();
     older["config"]["marginal"]["level_variance"] = serde_json::json!(1e3);
     let read = bamudi::Calibration::from_json_str(&older.to_string(), "older").unwrap();
-    assert_eq!(read.config().marginal, bamudi::MarginalPrior::default());
+    assert_eq!(read.config().coefficients, CoefficientMode::PriorMarginal);
 }
 
 /// The keys of the JSON object that starts right after `opening` in `text` (its own keys,
@@ -890,10 +893,10 @@ fn the_discrepancy_is_weighed_by_evidence_and_kept_only_where_the_data_need_it()
         let cfg = CalibrationParams::default()
             .estimator(EstimatorParams::ExactLinear)
             .theta_grid_points(41)
-            .marginal(MarginalPrior {
+            .coefficients(bamudi::CoefficientMode::Marginal(MarginalPrior {
                 presence,
                 ..MarginalPrior::default()
-            })
+            }))
             .check()
             .unwrap();
         Calibrate::new(&cfg).run(&model, &exps).unwrap()

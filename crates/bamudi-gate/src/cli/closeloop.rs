@@ -3,7 +3,7 @@
 use super::{GateArgs, build_gate, gate_source};
 use anyhow::{Context, Result};
 use bamudi::observe::Observer;
-use bamudi::{CalibrationConfig, CoefficientMode};
+use bamudi::{CalibrationConfig, ModeKind};
 use bamudi_closeloop::{
     CloseLoopConfig, CloseLoopOutcome, CloseLoopReport, MeasuredRecord, MissingPolicy, close_loop,
 };
@@ -286,7 +286,7 @@ fn read_tolerances(
     let label = format!("--tolerances {}", p.display());
     let text = session::read_input_text("--tolerances", p)?;
     let file: ToleranceFile = toml::from_str(&text).with_context(|| label.clone())?;
-    let mode = cal_cfg.map_or(CoefficientMode::Marginal, |c| c.coefficients);
+    let mode = cal_cfg.map_or(ModeKind::Marginal, |c| c.coefficients.kind());
     check_tolerance_specs(&file.tolerances, mode, &label)?;
     match source {
         GateSource::Config(gate) => check_tolerance_keys(&file.tolerances, gate, &label)?,

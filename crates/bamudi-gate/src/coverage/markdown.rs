@@ -3,11 +3,11 @@
 use super::{ACCEPTANCE_ALPHA, CoverageReport, LevelCoverage, RANK_BINS, ScenarioCoverage};
 
 /// The report's name of a coefficient mode.
-pub fn mode_label(mode: bamudi::CoefficientMode) -> &'static str {
+pub fn mode_label(mode: bamudi::ModeKind) -> &'static str {
     match mode {
-        bamudi::CoefficientMode::Marginal => "marginal (default)",
-        bamudi::CoefficientMode::ConditionalOnTheta => "conditional",
-        bamudi::CoefficientMode::PriorMarginal => "paper's Module 3",
+        bamudi::ModeKind::Marginal => "marginal (default)",
+        bamudi::ModeKind::ConditionalOnTheta => "conditional",
+        bamudi::ModeKind::PriorMarginal => "paper's Module 3",
     }
 }
 

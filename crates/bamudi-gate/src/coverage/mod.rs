@@ -41,7 +41,7 @@ use crate::paper::{ForceRmse, build_gate, gate_model, prior_mean_response};
 use bamudi::surrogate::FittedEstimator;
 use bamudi::validation::{Coverage, RankHistogram, binomial_acceptance};
 use bamudi::{
-    Calibrate, Calibration, CalibrationParams, CoefficientMode, EstimatorParams, MarginalPrior,
+    Calibrate, Calibration, CalibrationParams, EstimatorParams, MarginalPrior, ModeKind,
     SamplingRule, SupportPolicy,
 };
 use mitergate::data::truth::{Scenario, sample_levels};
@@ -73,7 +73,7 @@ pub struct CoverageOptions {
     /// Scenarios of Table 1 (1, 2).
     pub scenarios: Vec<u8>,
     /// Coefficient modes compared, each on every replicate.
-    pub modes: Vec<CoefficientMode>,
+    pub modes: Vec<ModeKind>,
     /// Replicate data sets per scenario.
     pub n_replicates: usize,
     /// Index of the first replicate: the study runs replicates `first_replicate ..
@@ -131,9 +131,9 @@ impl CoverageOptions {
         Self {
             scenarios: vec![1, 2],
             modes: vec![
-                CoefficientMode::Marginal,
-                CoefficientMode::ConditionalOnTheta,
-                CoefficientMode::PriorMarginal,
+                ModeKind::Marginal,
+                ModeKind::ConditionalOnTheta,
+                ModeKind::PriorMarginal,
             ],
             n_replicates: 100,
             first_replicate: 0,
@@ -160,7 +160,7 @@ impl CoverageOptions {
     /// estimator, marginal mode only.
     pub fn quick() -> Self {
         Self {
-            modes: vec![CoefficientMode::Marginal],
+            modes: vec![ModeKind::Marginal],
             n_replicates: 40,
             n_experiments: 120,
             theta_grid_points: 49,
@@ -189,7 +189,7 @@ impl CoverageOptions {
             return bad("scenarios", &format!("unknown scenario {s} (1 or 2)"));
         }
         if self.sbc.is_some()
-            && (self.modes != [CoefficientMode::Marginal]
+            && (self.modes != [ModeKind::Marginal]
                 || self.marginal.scales != bamudi::CoefficientScales::Isotropic)
         {
             return bad(
@@ -364,7 +364,7 @@ pub struct ScenarioCoverage {
     /// The estimator's kind (`exact_linear`, `lstm`, `ridge`).
     pub estimator: String,
     /// The coefficient mode.
-    pub mode: CoefficientMode,
+    pub mode: ModeKind,
     /// Replicates.
     pub n_replicates: usize,
     /// Empirical coverage of the central intervals, keyed by level ("0.5", "0.8", ...).
@@ -786,7 +786,7 @@ impl Setup<'_> {
             .unwrap_or(SamplingRule::default().rho_range)
     }
 
-    fn params(&self, mode: CoefficientMode, r: usize) -> CalibrationParams {
+    fn params(&self, mode: ModeKind, r: usize) -> CalibrationParams {
         let mut sampling = SamplingRule::default().noise_sd(self.opts.gauge_noise_sd);
         if let Some((lo, hi)) = self.opts.rho_range {
             sampling = sampling.rho_range(lo, hi);
@@ -812,11 +812,10 @@ impl Setup<'_> {
             .training_size(self.opts.training_size)
             .theta_grid_points(self.opts.theta_grid_points)
             .sampling(sampling)
-            .coefficients(mode)
-            .marginal(match mode {
+            .coefficients(match mode {
                 // the marginal mode's settings; the other modes take none
-                bamudi::CoefficientMode::Marginal => marginal,
-                _ => bamudi::MarginalPrior::default(),
+                ModeKind::Marginal => bamudi::CoefficientMode::Marginal(marginal),
+                other => other.with_defaults(),
             })
             .sigma_eps(sigma_eps)
             .seed(derive_seed(self.opts.seed, 7 + r as u64))
@@ -1090,7 +1089,7 @@ impl BandTally {
 /// The summary of one scenario and mode over its replicates.
 fn summarise(
     number: u8,
-    mode: CoefficientMode,
+    mode: ModeKind,
     opts: &CoverageOptions,
     reps: Vec<Replicate>,
 ) -> Result<ScenarioCoverage> {

@@ -434,26 +434,21 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
 
 /// Re-runs Module 3 of a finished calibration with another coefficient mode (same estimator,
 /// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::rerun_module3`]) and scores it
-/// like the main run; returns the scores and the variant's calibration. `marginal` is the
-/// coefficients' prior of the marginal mode (the other modes take none).
+/// like the main run; returns the scores and the variant's calibration. `mode` carries its
+/// settings (the marginal mode its prior).
 fn run_variant(
     s: &ScenarioRun<'_>,
     cal: &Calibration,
     main_scores: &Scores,
-    (mode, marginal): (CoefficientMode, &bamudi::MarginalPrior),
+    mode: CoefficientMode,
     observer: &dyn bamudi::observe::Observer,
 ) -> Result<(ConditionalResult, Calibration)> {
     let t = Instant::now();
-    let marginal = match mode {
-        CoefficientMode::Marginal => marginal.clone(),
-        _ => bamudi::MarginalPrior::default(),
-    };
     let cfg: CalibrationConfig = cal
         .config()
         .clone()
         .into_params()
         .coefficients(mode)
-        .marginal(marginal)
         .check()?;
     let cond = Calibrate::new(&cfg)
         .observer(observer)
@@ -572,12 +567,13 @@ pub fn run_scenario(
     let scores = score(&s.model, &cal, &s.scenario, contact, &s.new_x)?;
     clock.lap("scores of the paper's Module 3");
     let variant = |on: bool, mode| match on {
-        true => run_variant(&s, &cal, &scores, (mode, &opts.marginal_prior), observer).map(Some),
+        true => run_variant(&s, &cal, &scores, mode, observer).map(Some),
         false => Ok(None),
     };
     let conditional = variant(opts.conditional, CoefficientMode::ConditionalOnTheta)?.map(|v| v.0);
     clock.lap("conditional mode: Module 3 re-run and scores");
-    let (marginal, headline) = match variant(opts.marginal, CoefficientMode::Marginal)? {
+    let marginal_mode = CoefficientMode::Marginal(opts.marginal_prior.clone());
+    let (marginal, headline) = match variant(opts.marginal, marginal_mode)? {
         Some((result, cal)) => (Some(result), Some(cal)),
         None => (None, None),
     };

@@ -332,7 +332,7 @@ impl AsBuiltSkin {
             bamudi::Experiments::new(vec!["h_up".into(), "h_down".into()], gauges, x, y).unwrap();
         let cfg = CalibrationParams::default()
             .estimator(EstimatorParams::ExactLinear)
-            .coefficients(CoefficientMode::Marginal)
+            .coefficients(CoefficientMode::default())
             .theta_grid_points(121)
             .sampling(bamudi::SamplingRule::default().noise_sd(1.0))
             .seed(seed + 2)

@@ -57,7 +57,7 @@ pub trait CoefficientStrategy<U, O>: Sync {
 }
 
 /// The strategy of a mode.
-pub fn strategy<U, O>(mode: CoefficientMode) -> Box<dyn CoefficientStrategy<U, O>>
+pub fn strategy<U, O>(mode: &CoefficientMode) -> Box<dyn CoefficientStrategy<U, O>>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
@@ -65,7 +65,7 @@ where
     match mode {
         CoefficientMode::ConditionalOnTheta => Box::new(ConditionalOnTheta),
         // the marginal mode has no strategy of its own ([`super::method`] routes it apart)
-        CoefficientMode::PriorMarginal | CoefficientMode::Marginal => Box::new(PriorMarginal),
+        CoefficientMode::PriorMarginal | CoefficientMode::Marginal(_) => Box::new(PriorMarginal),
     }
 }
 

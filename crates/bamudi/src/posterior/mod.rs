@@ -128,21 +128,21 @@ impl Module3 {
 /// How Module 3 treats the discrepancy coefficients: through a [`CoefficientStrategy`] on
 /// Module 2's estimates (the paper's mode and the conditional one), or integrated out
 /// ([`marginal`]).
-pub(crate) enum Method<U, O> {
+pub(crate) enum Method<'a, U, O> {
     /// Module 2's coefficient GPs, adapted by the strategy.
     Modular(Box<dyn CoefficientStrategy<U, O>>),
-    /// The coefficients integrated out under their GP prior.
-    Marginal,
+    /// The coefficients integrated out under their GP prior (the mode's).
+    Marginal(&'a crate::params::MarginalPrior),
 }
 
 /// The method of a coefficient mode.
-pub(crate) fn method<U, O>(mode: crate::params::CoefficientMode) -> Method<U, O>
+pub(crate) fn method<U, O>(mode: &crate::params::CoefficientMode) -> Method<'_, U, O>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
     match mode {
-        crate::params::CoefficientMode::Marginal => Method::Marginal,
+        crate::params::CoefficientMode::Marginal(prior) => Method::Marginal(prior),
         other => Method::Modular(coefficients::strategy(other)),
     }
 }

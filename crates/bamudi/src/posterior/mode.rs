@@ -13,12 +13,12 @@ use super::marginal::MarginalFit;
 use super::no_discrepancy::NoDiscrepancyFit;
 use super::theta::ThetaPosterior;
 use super::{MarginalModeFit, ModeFit, Module3};
-use crate::params::CoefficientMode;
+use crate::params::ModeKind;
 use crate::surrogate::gps::CoefficientGps;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-/// What the conditional mode ([`CoefficientMode::ConditionalOnTheta`]) fitted.
+/// What the conditional mode ([`crate::CoefficientMode::ConditionalOnTheta`]) fitted.
 #[derive(Debug, Clone)]
 pub struct ConditionalFit {
     /// The profile search for `ρ` (the Eq.-30 value is kept inside it).
@@ -34,11 +34,11 @@ pub struct ConditionalFit {
 
 impl ModeFit {
     /// The coefficient mode this fit belongs to.
-    pub fn coefficient_mode(&self) -> CoefficientMode {
+    pub fn coefficient_mode(&self) -> ModeKind {
         match self {
-            Self::PriorMarginal => CoefficientMode::PriorMarginal,
-            Self::ConditionalOnTheta(_) => CoefficientMode::ConditionalOnTheta,
-            Self::Marginal(_) => CoefficientMode::Marginal,
+            Self::PriorMarginal => ModeKind::PriorMarginal,
+            Self::ConditionalOnTheta(_) => ModeKind::ConditionalOnTheta,
+            Self::Marginal(_) => ModeKind::Marginal,
         }
     }
 }

@@ -613,6 +613,10 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
             return Ok(vec![0.0; fit.priors.len()]);
         }
         let (cal, m2) = (self.cal, self.cal.module2());
+        // a loaded calibration's fit is its configured mode's (`Calibration::validate`)
+        let prior = cal.config().coefficients.marginal_prior().ok_or_else(|| {
+            BamudiError::Calibration("a marginal fit in a calibration of another mode".into())
+        })?;
         let ctx = crate::surrogate::training::x_context(
             self.model,
             cal.parts(),
@@ -623,7 +627,7 @@ impl<U: UnobservableModel, O: LinearObservableModel> Predictor<'_, U, O> {
         Ok(crate::posterior::marginal::prior_scales(
             &ctx,
             &self.model.basis,
-            cal.config().marginal.scales,
+            prior.scales,
         ))
     }
 

@@ -37,7 +37,7 @@ impl<'a, U: UnobservableModel, O: LinearObservableModel> Problem<'a, U, O> {
         observer: &'a dyn Observer,
     ) -> Result<Self> {
         check_data(model, exps)?;
-        if !model.tolerances.is_empty() && cfg.coefficients != crate::CoefficientMode::Marginal {
+        if !model.tolerances.is_empty() && cfg.coefficients.marginal_prior().is_none() {
             return Err(BamudiError::InvalidConfig {
                 name: "coefficients",
                 reason: format!(

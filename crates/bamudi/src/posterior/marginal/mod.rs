@@ -468,6 +468,8 @@ impl Covariance {
 /// every `θ` evaluated cached (the coarse pass, the refinements and the grid share them).
 struct MarginalLikelihood<'a, 'p, U, O> {
     p: &'a Problem<'p, U, O>,
+    /// The mode's prior.
+    prior: &'a MarginalPrior,
     cov: Covariance,
     y: DVector<f64>,
     cache: RwLock<HashMap<Vec<u64>, Stacked>>,
@@ -538,15 +540,17 @@ pub fn posterior<U, O>(
     m2: &Module2,
     ctx: &[XContext],
     sigma0: f64,
+    prior: &MarginalPrior,
 ) -> Result<Module3>
 where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    let (priors, amps) = coefficient_priors(m2, ctx, &p.exps.x, &p.model.basis, &p.cfg.marginal);
+    let (priors, amps) = coefficient_priors(m2, ctx, &p.exps.x, &p.model.basis, prior);
     let lr = LowRank::new(&priors, &p.exps.x, &amps, &p.parts.b)?;
     let mut lik = MarginalLikelihood {
         p,
+        prior,
         cov: Covariance::new(lr, 1.0, sigma0 * sigma0)?,
         y: DVector::from_iterator(p.exps.y.len(), p.exps.y.transpose().iter().copied()),
         cache: RwLock::new(HashMap::new()),
@@ -563,14 +567,10 @@ where
     // with declared tolerances the discrepancy model's evidence integrates them and the fit
     // without one does not: the comparison would not be of the discrepancy alone
     let no_tolerances = p.model.tolerances.is_empty();
-    let averaged = match (
-        p.cfg.marginal.presence,
-        p.cfg.no_discrepancy_fit,
-        no_tolerances,
-    ) {
+    let averaged = match (prior.presence, p.cfg.no_discrepancy_fit, no_tolerances) {
         (DiscrepancyPresence::Weighed, true, true) => {
             // the amplitude and the length-scale factor, unless held
-            let hyper = if p.cfg.marginal.fixed.is_some() { 0 } else { 2 };
+            let hyper = if prior.fixed.is_some() { 0 } else { 2 };
             ModelAverage::weigh(&post, &post_without, lik.y.len(), hyper)?
         }
         _ => None,
@@ -603,7 +603,7 @@ where
                 amplitudes: amps,
                 support: fitted.support,
                 support_theta: theta_hat,
-                orthonormal_basis: p.cfg.marginal.scales == CoefficientScales::Isotropic,
+                orthonormal_basis: prior.scales == CoefficientScales::Isotropic,
                 nodes,
                 tolerances,
                 tolerance_columns: lik.cov.tolerance_columns().cloned(),
@@ -629,11 +629,11 @@ where
     let mut theta_hat = coarse_best(lik)?;
     let (mut round, mut bracket, mut start) = (0, LN_LENGTH_FACTOR, 0.0);
     loop {
-        let support = match p.cfg.marginal.mask_outside_support {
+        let support = match lik.prior.mask_outside_support {
             true => p.model.unobservable.discrepancy_support(&theta_hat),
             false => None,
         };
-        let orthonormal = p.cfg.marginal.scales == CoefficientScales::Isotropic;
+        let orthonormal = lik.prior.scales == CoefficientScales::Isotropic;
         let (_, b) = supported_basis(&p.parts, support.as_deref(), orthonormal)?;
         let tolerances = lik.tolerance_columns(&theta_hat)?;
         let search = (bracket, start);
@@ -832,7 +832,7 @@ where
     U: UnobservableModel,
     O: LinearObservableModel,
 {
-    if let Some(fixed) = &lik.p.cfg.marginal.fixed {
+    if let Some(fixed) = &lik.prior.fixed {
         let pr = scale_lengths(priors, fixed.length_scale_factor);
         let lr = LowRank::new(&pr, &lik.p.exps.x, amps, b)?;
         // `fixed` is accepted only with σ_ε configured (`CalibrationParams::check`)
