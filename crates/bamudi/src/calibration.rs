@@ -12,10 +12,11 @@ use crate::error::{BamudiError, Result};
 use crate::observe::{Event, Observer, Silent, Stage};
 use crate::params::{CalibrationConfig, CalibrationParams, ModeKind, ParamsFile};
 use crate::posterior::{self, Method, Module3, marginal};
+use crate::surrogate::artefact::ModelSignature;
 use crate::surrogate::estimator::FittedEstimator;
 use crate::surrogate::gps::CoefficientGps;
 use crate::surrogate::training::LinearParts;
-use crate::surrogate::{self, Module2, Problem};
+use crate::surrogate::{self, Module2, Problem, Surrogate};
 use mlmodel::{LinearObservableModel, MultiLevelModel, UnobservableModel};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
@@ -49,16 +50,6 @@ impl Timings {
     pub fn module2_s(&self) -> f64 {
         self.training_set_s + self.estimator_s + self.rho_s + self.gp_s
     }
-}
-
-/// What a [`Calibration`] remembers of the model it was fitted to, so that Module 4 refuses a
-/// different one.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct ModelSignature {
-    input_names: Vec<String>,
-    output_names: Vec<String>,
-    response_len: usize,
-    n_coefficients: usize,
 }
 
 /// A saved calibration's configuration, checked again. The marginal mode's settings in a
@@ -210,15 +201,8 @@ impl<'a> Calibrate<'a> {
     {
         let p = Problem::new(model, exps, self.cfg, self.observer)?;
         let mut t = Timings::default();
-        let training = self.stage(Stage::TrainingSet, &mut t.training_set_s, || {
-            surrogate::training_set(&p)
-        })?;
-        let estimator = self.stage(Stage::Estimator, &mut t.estimator_s, || {
-            surrogate::fit_estimator(&p, training.as_ref())
-        })?;
-        let pool = training.as_ref().map_or(0, |s| s.pool_size);
-        drop(training);
-        self.finish(p, estimator, pool, t)
+        let (m2, ctx) = self.fit_module2(&p, None, &mut t)?;
+        self.conclude(p, m2, ctx, t)
     }
 
     /// Modules 2-3 with an estimator fitted before (e.g. by another calibration of the same
@@ -236,17 +220,36 @@ impl<'a> Calibrate<'a> {
         O: LinearObservableModel,
     {
         let p = Problem::new(model, exps, self.cfg, self.observer)?;
-        self.finish(p, estimator, training_pool_size, Timings::default())
+        let mut t = Timings::default();
+        let given = Some((estimator, training_pool_size));
+        let (m2, ctx) = self.fit_module2(&p, given, &mut t)?;
+        self.conclude(p, m2, ctx, t)
     }
 
-    /// Module 3 (and the adequacy checks) in this configuration's coefficient mode on Module 2
-    /// of `previous`, a calibration of the same model and data in another mode: the training
-    /// set, the estimator, `ρ*` (Eq. 30), `α̂` and the coefficient GPs are taken from it,
-    /// not recomputed — they do not depend on the coefficient mode, so the result is the one
-    /// [`run_with_estimator`](Self::run_with_estimator) gives with `previous`'s estimator, bit
-    /// for bit, without refitting the GPs. Errors if `previous` was fitted to another model
-    /// or other experiment inputs, or under another `θ` quadrature rule or input box (another
-    /// seed, prior or marginalisation), or another `ρ` search, sampling rule, GP setting,
+    /// Module 2 alone — the training set, the estimator of Eq. 29, `ρ*` (Eq. 30), `α̂` and the
+    /// coefficient GPs — as the [`Surrogate`] Module 3 runs on in any coefficient mode
+    /// ([`run_on`](Self::run_on), which has an example).
+    pub fn fit_surrogate<U, O>(
+        &self,
+        model: &MultiLevelModel<U, O>,
+        exps: &Experiments,
+    ) -> Result<Surrogate>
+    where
+        U: UnobservableModel,
+        O: LinearObservableModel,
+    {
+        let p = Problem::new(model, exps, self.cfg, self.observer)?;
+        let (m2, _) = self.fit_module2(&p, None, &mut Timings::default())?;
+        Ok(Surrogate::fitted(&p, m2))
+    }
+
+    /// Module 3 (and the adequacy checks) in this configuration's coefficient mode on a
+    /// [`Surrogate`] fitted before: from [`fit_surrogate`](Self::fit_surrogate), or the one a
+    /// calibration of the same model and data ran on ([`Calibration::surrogate`]). Nothing of
+    /// Module 2 is fitted again, so the result is the one [`run`](Self::run) gives in this
+    /// mode, bit for bit. Errors, naming what differs, if the surrogate was fitted to another
+    /// model or other experiment inputs, or under another `θ` quadrature rule or input box
+    /// (another seed, prior or marginalisation), `ρ` search, sampling rule, GP setting,
     /// estimator or training-set size.
     ///
     /// ```
@@ -291,58 +294,74 @@ impl<'a> Calibrate<'a> {
     ///     .coefficients(CoefficientMode::PriorMarginal)
     ///     .check()
     ///     .unwrap();
-    /// let first = Calibrate::new(&paper).run(&model, &exps).unwrap();
+    /// // Module 2 once, Module 3 in two modes on it
+    /// let surrogate = Calibrate::new(&paper).fit_surrogate(&model, &exps).unwrap();
+    /// let first = Calibrate::new(&paper).run_on(&model, &exps, &surrogate).unwrap();
     /// let conditional = paper.clone().into_params()
     ///     .coefficients(CoefficientMode::ConditionalOnTheta)
     ///     .check()
     ///     .unwrap();
-    /// let again = Calibrate::new(&conditional).rerun_module3(&model, &exps, &first).unwrap();
-    /// let estimator = first.module2().estimator.clone();
-    /// let refit = Calibrate::new(&conditional)
-    ///     .run_with_estimator(&model, &exps, estimator, 0)
-    ///     .unwrap();
-    /// assert_eq!(again.module3().posterior.mean(), refit.module3().posterior.mean());
+    /// let again = Calibrate::new(&conditional).run_on(&model, &exps, &surrogate).unwrap();
+    /// // each the answer of a calibration from scratch in its mode
+    /// let full = Calibrate::new(&conditional).run(&model, &exps).unwrap();
+    /// assert_eq!(again.module3().posterior.mean(), full.module3().posterior.mean());
+    /// assert_eq!(first.module3().posterior.mean(), Calibrate::new(&paper).run(&model, &exps).unwrap().module3().posterior.mean());
+    /// // a finished calibration hands on the surrogate it ran on
+    /// let from_first = Calibrate::new(&conditional).run_on(&model, &exps, &first.surrogate()).unwrap();
+    /// assert_eq!(from_first.module3().posterior.mean(), full.module3().posterior.mean());
     /// // Module 2 under another seed is another Module 2
     /// let reseeded = conditional.into_params().seed(9).check().unwrap();
-    /// let err = Calibrate::new(&reseeded).rerun_module3(&model, &exps, &first).unwrap_err();
-    /// assert!(err.to_string().contains("cannot be reused"));
+    /// let err = Calibrate::new(&reseeded).run_on(&model, &exps, &surrogate).unwrap_err();
+    /// assert!(err.to_string().contains("its seed differs"), "{err}");
     /// ```
-    pub fn rerun_module3<U, O>(
+    pub fn run_on<U, O>(
         &self,
         model: &MultiLevelModel<U, O>,
         exps: &Experiments,
-        previous: &Calibration,
+        surrogate: &Surrogate,
     ) -> Result<Calibration>
     where
         U: UnobservableModel,
         O: LinearObservableModel,
     {
         let p = Problem::new(model, exps, self.cfg, self.observer)?;
-        previous.check_module2_reuse(&p)?;
+        surrogate.check_fits(&p)?;
         let mut t = Timings::default();
         let ctx = self.stage(Stage::Rho, &mut t.rho_s, || surrogate::contexts(&p))?;
-        self.conclude(p, previous.module2.clone(), ctx, t)
+        self.conclude(p, surrogate.clone().into_module2(), ctx, t)
     }
 
-    /// `ρ*`, `α̂`, the GPs (Module 2) and Module 3.
-    fn finish<U, O>(
+    /// Module 2 (the training set and the estimator unless `given`, then `ρ*`, `α̂` and the
+    /// coefficient GPs), with the experiments' contexts Module 3 reads.
+    fn fit_module2<U, O>(
         &self,
-        p: Problem<'_, U, O>,
-        estimator: FittedEstimator,
-        training_pool_size: usize,
-        mut t: Timings,
-    ) -> Result<Calibration>
+        p: &Problem<'_, U, O>,
+        given: Option<(FittedEstimator, usize)>,
+        t: &mut Timings,
+    ) -> Result<(Module2, Vec<surrogate::training::XContext>)>
     where
         U: UnobservableModel,
         O: LinearObservableModel,
     {
+        let (estimator, training_pool_size) = match given {
+            Some(given) => given,
+            None => {
+                let training = self.stage(Stage::TrainingSet, &mut t.training_set_s, || {
+                    surrogate::training_set(p)
+                })?;
+                let estimator = self.stage(Stage::Estimator, &mut t.estimator_s, || {
+                    surrogate::fit_estimator(p, training.as_ref())
+                })?;
+                (estimator, training.as_ref().map_or(0, |s| s.pool_size))
+            }
+        };
         let (ctx, rho, alpha_hat) = self.stage(Stage::Rho, &mut t.rho_s, || {
-            let ctx = surrogate::contexts(&p)?;
-            let (rho, alpha) = surrogate::rho_and_alpha(&p, &estimator, &ctx)?;
+            let ctx = surrogate::contexts(p)?;
+            let (rho, alpha) = surrogate::rho_and_alpha(p, &estimator, &ctx)?;
             Ok((ctx, rho, alpha))
         })?;
         let gps = self.stage(Stage::CoefficientGps, &mut t.gp_s, || {
-            surrogate::coefficient_gps(&p, &alpha_hat)
+            surrogate::coefficient_gps(p, &alpha_hat)
         })?;
         let m2 = Module2 {
             x_bounds: p.x_bounds.clone(),
@@ -353,7 +372,7 @@ impl<'a> Calibrate<'a> {
             alpha_hat,
             gps,
         };
-        self.conclude(p, m2, ctx, t)
+        Ok((m2, ctx))
     }
 
     /// Module 3 in the configured mode on Module 2's results, then the adequacy checks.
@@ -453,17 +472,6 @@ impl<'a> Calibrate<'a> {
     }
 }
 
-impl ModelSignature {
-    fn of<U: UnobservableModel, O: LinearObservableModel>(model: &MultiLevelModel<U, O>) -> Self {
-        Self {
-            input_names: model.unobservable.input_names(),
-            output_names: model.observable.output_names(),
-            response_len: model.unobservable.response_len(),
-            n_coefficients: model.basis.n_coefficients(),
-        }
-    }
-}
-
 impl Calibration {
     /// The checked configuration used.
     pub fn config(&self) -> &CalibrationConfig {
@@ -472,6 +480,17 @@ impl Calibration {
     /// Module 2's results.
     pub fn module2(&self) -> &Module2 {
         &self.module2
+    }
+    /// The [`Surrogate`] (Module 2) this calibration ran on, to run Module 3 on in another
+    /// coefficient mode ([`Calibrate::run_on`]).
+    pub fn surrogate(&self) -> Surrogate {
+        Surrogate::from_parts(
+            self.module2.clone(),
+            self.signature.clone(),
+            self.parts.a.clone(),
+            self.x_experiments.clone(),
+            &self.config,
+        )
     }
     /// Module 3's results.
     pub fn module3(&self) -> &Module3 {
@@ -600,36 +619,6 @@ impl Calibration {
             .marginal_state
             .get_or_init(|| std::sync::Arc::new(state))
             .clone())
-    }
-
-    /// Checks that this calibration's Module 2 holds for `p` (the problem of another mode):
-    /// the same model, experiment inputs, `θ` rule, input box, and the configuration that
-    /// Module 2 reads (seed, `ρ` search, sampling rule, GP restarts, estimator, training-set
-    /// size).
-    fn check_module2_reuse<U, O>(&self, p: &Problem<'_, U, O>) -> Result<()>
-    where
-        U: UnobservableModel,
-        O: LinearObservableModel,
-    {
-        self.check_model(p.model)?;
-        let (a, b) = (&self.config, p.cfg);
-        let differs = [
-            ("experiment inputs", self.x_experiments != p.exps.x),
-            ("θ quadrature rule", self.module2.theta_rule != p.theta_rule),
-            ("input box", self.module2.x_bounds != p.x_bounds),
-            ("seed", a.seed != b.seed),
-            ("ρ search", a.rho != b.rho),
-            ("sampling rule", a.sampling != b.sampling),
-            ("GP restarts", a.gp_restarts != b.gp_restarts),
-            ("estimator", a.estimator != b.estimator),
-            ("training-set size", a.training_size != b.training_size),
-        ];
-        match differs.iter().find(|(_, d)| *d) {
-            Some((what, _)) => Err(BamudiError::Calibration(format!(
-                "Module 2 of the earlier calibration cannot be reused: its {what} differs"
-            ))),
-            None => Ok(()),
-        }
     }
 
     /// Checks that `model` is the one this calibration was fitted to.

@@ -63,3 +63,4 @@ pub use params::{
 };
 pub use posterior::{SupportPolicy, ThetaPosterior, ThetaSummary};
 pub use predict::{Band, DrawPaths, Predictor};
+pub use surrogate::Surrogate;

@@ -116,13 +116,15 @@ impl SamplingRule {
         self
     }
 
-    /// Checks the values.
+    /// Checks the values ([`CalibrationParams::check`] calls it).
     ///
     /// ```
-    /// assert!(bamudi::SamplingRule::default().validate().is_ok());
-    /// assert!(bamudi::SamplingRule::default().alpha_scale(-1.0).validate().is_err());
+    /// use bamudi::{CalibrationParams, SamplingRule};
+    /// assert!(CalibrationParams::default().sampling(SamplingRule::default()).check().is_ok());
+    /// let bad = SamplingRule::default().alpha_scale(-1.0);
+    /// assert!(CalibrationParams::default().sampling(bad).check().is_err());
     /// ```
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         let (lo, hi) = self.rho_range;
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(BamudiError::config(
@@ -417,16 +419,18 @@ pub enum ModeKind {
     Marginal,
 }
 
-impl ModeKind {
+impl From<ModeKind> for CoefficientMode {
     /// The mode with its default settings.
-    pub fn with_defaults(self) -> CoefficientMode {
-        match self {
-            Self::PriorMarginal => CoefficientMode::PriorMarginal,
-            Self::ConditionalOnTheta => CoefficientMode::ConditionalOnTheta,
-            Self::Marginal => CoefficientMode::default(),
+    fn from(kind: ModeKind) -> Self {
+        match kind {
+            ModeKind::PriorMarginal => Self::PriorMarginal,
+            ModeKind::ConditionalOnTheta => Self::ConditionalOnTheta,
+            ModeKind::Marginal => Self::default(),
         }
     }
+}
 
+impl ModeKind {
     /// The name a configuration file uses (`prior_marginal`, `conditional_on_theta`,
     /// `marginal`).
     pub fn name(self) -> &'static str {
@@ -978,7 +982,7 @@ impl TryFrom<ParamsFile> for CalibrationParams {
     fn try_from(f: ParamsFile) -> Result<Self> {
         let coefficients = match (f.coefficients, f.marginal) {
             (ModeKind::Marginal, prior) => CoefficientMode::Marginal(prior.unwrap_or_default()),
-            (kind, None) => kind.with_defaults(),
+            (kind, None) => kind.into(),
             (kind, Some(_)) => {
                 return Err(BamudiError::config(
                     "marginal",

@@ -640,8 +640,9 @@ fn in_each_mode(
 
 /// The model-row memo changes no number of a calibration: the beam calibrated (marginal
 /// mode, exact estimator) without a memo, with one, and again with the now-filled memo (every
-/// row a hit) gives the same Module 2 and Module 3, value for value; so does
-/// `rerun_module3` in the paper's mode against a full run in that mode.
+/// row a hit) gives the same Module 2 and Module 3, value for value; so does Module 3 run on
+/// a calibration's surrogate (`run_on`), or on one fitted alone (`fit_surrogate`), against a
+/// full run in that mode.
 #[test]
 fn row_memo_and_module3_reruns_change_no_calibration() {
     use bamudi::{Calibrate, CoefficientMode, EstimatorParams};
@@ -677,19 +678,24 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
     // Module 3 re-run on `base` equals the full calibration in `params`' mode (returned).
     // Both checks below go through this closure; it holds the same `json(rerun) == json(full)`
     // assertion each of them had written out before (folded, not changed).
-    let rerun_equals_run = |params: &bamudi::CalibrationConfig, base| {
-        let rerun = Calibrate::new(params)
-            .rerun_module3(&memo, &exps, base)
-            .unwrap();
+    let rerun_equals_run = |params: &bamudi::CalibrationConfig, base: &bamudi::Surrogate| {
+        let rerun = Calibrate::new(params).run_on(&memo, &exps, base).unwrap();
         let full = Calibrate::new(params).run(&plain, &exps).unwrap();
         assert!(json(&rerun) == json(&full));
         full
     };
     let paper = in_mode(CoefficientMode::PriorMarginal);
-    let full = rerun_equals_run(&paper, &first);
+    let full = rerun_equals_run(&paper, &first.surrogate());
     // the conditional mode on the paper mode's Module 2 (the reproduction's sensitivity study)
     let conditional = in_mode(CoefficientMode::ConditionalOnTheta);
-    rerun_equals_run(&conditional, &full);
+    rerun_equals_run(&conditional, &full.surrogate());
+    // and on Module 2 fitted alone
+    let alone = Calibrate::new(&paper).fit_surrogate(&memo, &exps).unwrap();
+    assert_eq!(
+        serde_json::to_value(alone.module2()).unwrap(),
+        json(&full).0
+    );
+    rerun_equals_run(&conditional, &alone);
     // a configuration whose Module 2 would differ is refused, not run on the old one
     let ridge = conditional
         .into_params()
@@ -697,7 +703,7 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         .check()
         .unwrap();
     let err = Calibrate::new(&ridge)
-        .rerun_module3(&memo, &exps, &full)
+        .run_on(&memo, &exps, &full.surrogate())
         .unwrap_err();
     assert!(err.to_string().contains("estimator differs"), "{err}");
 }

@@ -815,7 +815,7 @@ impl Setup<'_> {
             .coefficients(match mode {
                 // the marginal mode's settings; the other modes take none
                 ModeKind::Marginal => bamudi::CoefficientMode::Marginal(marginal),
-                other => other.with_defaults(),
+                other => other.into(),
             })
             .sigma_eps(sigma_eps)
             .seed(derive_seed(self.opts.seed, 7 + r as u64))

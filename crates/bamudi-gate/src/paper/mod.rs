@@ -433,7 +433,7 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
 }
 
 /// Re-runs Module 3 of a finished calibration with another coefficient mode (same estimator,
-/// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::rerun_module3`]) and scores it
+/// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::run_on`] its surrogate) and scores it
 /// like the main run; returns the scores and the variant's calibration. `mode` carries its
 /// settings (the marginal mode its prior).
 fn run_variant(
@@ -450,9 +450,10 @@ fn run_variant(
         .into_params()
         .coefficients(mode)
         .check()?;
-    let cond = Calibrate::new(&cfg)
-        .observer(observer)
-        .rerun_module3(&s.model, &s.exps, cal)?;
+    let cond =
+        Calibrate::new(&cfg)
+            .observer(observer)
+            .run_on(&s.model, &s.exps, &cal.surrogate())?;
     let seconds = t.elapsed().as_secs_f64();
     let scores = score(&s.model, &cond, &s.scenario, s.contact, &s.new_x)?;
     let result = ConditionalResult {

@@ -124,7 +124,7 @@ pub(super) fn study(
                 cal
             }
         };
-        let cal = Calibrate::new(&conditional).rerun_module3(model, &sub, &paper_cal)?;
+        let cal = Calibrate::new(&conditional).run_on(model, &sub, &paper_cal.surrogate())?;
         rows.push(row("conditional coefficients", &cal));
     }
     Ok(rows)

@@ -7,6 +7,7 @@
 //! `calibration` runs them in order, times them and collects a [`Module2`].
 
 pub(crate) mod accuracy;
+pub(crate) mod artefact;
 pub(crate) mod estimator;
 pub(crate) mod gps;
 pub(crate) mod problem;
@@ -14,6 +15,7 @@ pub(crate) mod rho;
 pub(crate) mod training;
 
 pub use accuracy::{EstimatorAccuracy, estimator_accuracy};
+pub use artefact::Surrogate;
 pub use estimator::{CoefficientEstimator, FittedEstimator, LstmSettings};
 pub use gps::CoefficientGps;
 pub(crate) use problem::Problem;
