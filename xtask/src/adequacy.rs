@@ -552,6 +552,12 @@ mod tests {
 
     /// The runs' configuration is read by the CLI's own parser as meant: the level variance
     /// (written in exponent form) when given, the library's default when not.
+    /// The marginal prior's level variance of a run's calibration.
+    fn level_variance(spec: &CalibrateSpec) -> f64 {
+        let prior = spec.calibration.coefficients.marginal_prior();
+        prior.expect("the marginal mode").level_variance
+    }
+
     #[test]
     fn the_runs_configuration_carries_the_level_variance() {
         for (level, want) in [
@@ -562,15 +568,7 @@ mod tests {
             let text = calibration_toml((81.0, 105.0), level, None, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.prior(), (81.0, 105.0), "{text}");
-            assert_eq!(
-                spec.calibration
-                    .coefficients
-                    .marginal_prior()
-                    .unwrap()
-                    .level_variance,
-                want,
-                "{text}"
-            );
+            assert_eq!(level_variance(&spec), want, "{text}");
         }
     }
 
@@ -639,15 +637,7 @@ mod tests {
             let text = calibration_toml((81.0, 105.0), Some(1e3), range, &[]);
             let spec = CalibrateSpec::from_toml_str(&text, "cal.toml").unwrap();
             assert_eq!(spec.calibration.sampling.rho_range, want, "{text}");
-            assert_eq!(
-                spec.calibration
-                    .coefficients
-                    .marginal_prior()
-                    .unwrap()
-                    .level_variance,
-                1e3,
-                "{text}"
-            );
+            assert_eq!(level_variance(&spec), 1e3, "{text}");
         }
     }
 
