@@ -179,6 +179,10 @@ def test_the_marginal_mode_gives_rho_draws_and_a_verdict(data):
     assumed = bamudi.calibrate(analytic.model, data, {**config, "marginal": {"presence": "assumed"}}, seed=5)
     assert assumed.probability_without is None
     assert assumed.theta_mean[0] == c.theta_mean[0]  # the gap's posterior is not weighed
+    # the marginal mode's settings are its own: beside another mode they are refused, naming them
+    other = {**config, "coefficients": "prior_marginal", "marginal": {"presence": "assumed"}}
+    with pytest.raises(bamudi.BamudiError, match=r"\[marginal\] settings belong"):
+        bamudi.calibrate(analytic.model, data, other, seed=5)
 
 
 def test_two_threads_calibrate_with_callbacks_at_once(data, cal):

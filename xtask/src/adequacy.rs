@@ -550,14 +550,14 @@ mod tests {
     use super::*;
     use bamudi_gate::session::CalibrateSpec;
 
-    /// The runs' configuration is read by the CLI's own parser as meant: the level variance
-    /// (written in exponent form) when given, the library's default when not.
     /// The marginal prior's level variance of a run's calibration.
     fn level_variance(spec: &CalibrateSpec) -> f64 {
         let prior = spec.calibration.coefficients.marginal_prior();
         prior.expect("the marginal mode").level_variance
     }
 
+    /// The runs' configuration is read by the CLI's own parser as meant: the level variance
+    /// (written in exponent form) when given, the library's default when not.
     #[test]
     fn the_runs_configuration_carries_the_level_variance() {
         for (level, want) in [

@@ -228,7 +228,7 @@ impl<'a> Calibrate<'a> {
 
     /// Module 2 alone — the training set, the estimator of Eq. 29, `ρ*` (Eq. 30), `α̂` and the
     /// coefficient GPs — as the [`Surrogate`] Module 3 runs on in any coefficient mode
-    /// ([`run_on`](Self::run_on), which has an example).
+    /// ([`run_with_surrogate`](Self::run_with_surrogate), which has an example).
     pub fn fit_surrogate<U, O>(
         &self,
         model: &MultiLevelModel<U, O>,
@@ -246,10 +246,12 @@ impl<'a> Calibrate<'a> {
     /// Module 3 (and the adequacy checks) in this configuration's coefficient mode on a
     /// [`Surrogate`] fitted before: from [`fit_surrogate`](Self::fit_surrogate), or the one a
     /// calibration of the same model and data ran on ([`Calibration::surrogate`]). Nothing of
-    /// Module 2 is fitted again, so the result is the one [`run`](Self::run) gives in this
-    /// mode, bit for bit. Errors, naming what differs, if the surrogate was fitted to another
-    /// model or other experiment inputs, or under another `θ` quadrature rule or input box
-    /// (another seed, prior or marginalisation), `ρ` search, sampling rule, GP setting,
+    /// Module 2 is fitted again: on a surrogate from `fit_surrogate` or [`run`](Self::run) the
+    /// result is the one `run` gives in this mode, bit for bit (on one from
+    /// [`run_with_estimator`](Self::run_with_estimator), the one that gives). Errors, naming
+    /// what differs, if the surrogate was fitted to another model (signature, `A`, basis) or
+    /// other experiments (inputs or outputs), or under another `θ` quadrature rule or input
+    /// box (another seed, prior or marginalisation), `ρ` search, sampling rule, GP setting,
     /// estimator or training-set size.
     ///
     /// ```
@@ -296,25 +298,25 @@ impl<'a> Calibrate<'a> {
     ///     .unwrap();
     /// // Module 2 once, Module 3 in two modes on it
     /// let surrogate = Calibrate::new(&paper).fit_surrogate(&model, &exps).unwrap();
-    /// let first = Calibrate::new(&paper).run_on(&model, &exps, &surrogate).unwrap();
+    /// let first = Calibrate::new(&paper).run_with_surrogate(&model, &exps, &surrogate).unwrap();
     /// let conditional = paper.clone().into_params()
     ///     .coefficients(CoefficientMode::ConditionalOnTheta)
     ///     .check()
     ///     .unwrap();
-    /// let again = Calibrate::new(&conditional).run_on(&model, &exps, &surrogate).unwrap();
+    /// let again = Calibrate::new(&conditional).run_with_surrogate(&model, &exps, &surrogate).unwrap();
     /// // each the answer of a calibration from scratch in its mode
     /// let full = Calibrate::new(&conditional).run(&model, &exps).unwrap();
     /// assert_eq!(again.module3().posterior.mean(), full.module3().posterior.mean());
     /// assert_eq!(first.module3().posterior.mean(), Calibrate::new(&paper).run(&model, &exps).unwrap().module3().posterior.mean());
     /// // a finished calibration hands on the surrogate it ran on
-    /// let from_first = Calibrate::new(&conditional).run_on(&model, &exps, &first.surrogate()).unwrap();
+    /// let from_first = Calibrate::new(&conditional).run_with_surrogate(&model, &exps, &first.surrogate()).unwrap();
     /// assert_eq!(from_first.module3().posterior.mean(), full.module3().posterior.mean());
     /// // Module 2 under another seed is another Module 2
     /// let reseeded = conditional.into_params().seed(9).check().unwrap();
-    /// let err = Calibrate::new(&reseeded).run_on(&model, &exps, &surrogate).unwrap_err();
+    /// let err = Calibrate::new(&reseeded).run_with_surrogate(&model, &exps, &surrogate).unwrap_err();
     /// assert!(err.to_string().contains("its seed differs"), "{err}");
     /// ```
-    pub fn run_on<U, O>(
+    pub fn run_with_surrogate<U, O>(
         &self,
         model: &MultiLevelModel<U, O>,
         exps: &Experiments,
@@ -328,7 +330,7 @@ impl<'a> Calibrate<'a> {
         surrogate.check_fits(&p)?;
         let mut t = Timings::default();
         let ctx = self.stage(Stage::Rho, &mut t.rho_s, || surrogate::contexts(&p))?;
-        self.conclude(p, surrogate.clone().into_module2(), ctx, t)
+        self.conclude(p, surrogate.module2().clone(), ctx, t)
     }
 
     /// Module 2 (the training set and the estimator unless `given`, then `ρ*`, `α̂` and the
@@ -371,6 +373,7 @@ impl<'a> Calibrate<'a> {
             rho,
             alpha_hat,
             gps,
+            outputs_digest: Some(surrogate::artefact::outputs_digest(&p.exps.y)),
         };
         Ok((m2, ctx))
     }
@@ -482,12 +485,12 @@ impl Calibration {
         &self.module2
     }
     /// The [`Surrogate`] (Module 2) this calibration ran on, to run Module 3 on in another
-    /// coefficient mode ([`Calibrate::run_on`]).
+    /// coefficient mode ([`Calibrate::run_with_surrogate`]).
     pub fn surrogate(&self) -> Surrogate {
         Surrogate::from_parts(
             self.module2.clone(),
             self.signature.clone(),
-            self.parts.a.clone(),
+            self.parts.clone(),
             self.x_experiments.clone(),
             &self.config,
         )
@@ -707,10 +710,7 @@ impl Calibration {
 
     /// Consistency of a loaded calibration (sizes, a positive `σ_ε`).
     fn validate(&self) -> std::result::Result<(), String> {
-        let (fitted, configured) = (
-            self.module3.mode.coefficient_mode(),
-            self.config.coefficients.kind(),
-        );
+        let (fitted, configured) = (self.module3.mode.kind(), self.config.coefficients.kind());
         if fitted != configured {
             return Err(format!(
                 "config.coefficients is {configured:?}, but module3 holds the fit of the \

@@ -631,8 +631,10 @@ pub enum CoefficientScales {
 }
 
 /// Everything a calibration needs besides the model and the data, as a user writes it (TOML
-/// or setters). Nothing is checked until [`check`](Self::check) turns it into a
-/// [`CalibrationConfig`], which cannot change afterwards (linfa's params → checked params).
+/// or setters). Its values are checked when [`check`](Self::check) turns it into a
+/// [`CalibrationConfig`], which cannot change afterwards (linfa's params → checked params);
+/// reading a file already refuses what cannot be represented, such as a `[marginal]` section
+/// beside another coefficient mode.
 ///
 /// ```
 /// use bamudi::{CalibrationParams, EstimatorParams};
@@ -783,10 +785,11 @@ impl CalibrationParams {
     /// assert!(bamudi::CalibrationParams::default().check().is_ok());
     /// let e = bamudi::CalibrationParams::default().sigma_eps(Some(-1.0)).check().unwrap_err();
     /// assert!(e.to_string().contains("sigma_eps"));
-    /// // a mode's settings cannot be given to another mode
-    /// let text = "coefficients = \"prior_marginal\"\n[marginal]\nlevel_variance = 1e4";
-    /// let e = bamudi::CalibrationConfig::from_toml_str(text).unwrap_err();
-    /// assert!(e.to_string().contains("`marginal`"), "{e}");
+    /// // the marginal mode's prior is checked with it
+    /// let prior = bamudi::MarginalPrior { level_variance: -1.0, ..Default::default() };
+    /// let mode = bamudi::CoefficientMode::Marginal(prior);
+    /// let e = bamudi::CalibrationParams::default().coefficients(mode).check().unwrap_err();
+    /// assert!(e.to_string().contains("marginal.level_variance"), "{e}");
     /// ```
     pub fn check(self) -> Result<CalibrationConfig> {
         self.sampling.validate()?;

@@ -641,7 +641,7 @@ fn in_each_mode(
 /// The model-row memo changes no number of a calibration: the beam calibrated (marginal
 /// mode, exact estimator) without a memo, with one, and again with the now-filled memo (every
 /// row a hit) gives the same Module 2 and Module 3, value for value; so does Module 3 run on
-/// a calibration's surrogate (`run_on`), or on one fitted alone (`fit_surrogate`), against a
+/// a calibration's surrogate (`run_with_surrogate`), or on one fitted alone (`fit_surrogate`), against a
 /// full run in that mode.
 #[test]
 fn row_memo_and_module3_reruns_change_no_calibration() {
@@ -662,7 +662,8 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         .unwrap();
     let json = |c: &bamudi::Calibration| {
         let m2 = serde_json::to_value(c.module2()).unwrap();
-        (m2, serde_json::to_value(c.module3()).unwrap())
+        let verdict = serde_json::to_value(c.adequacy()).unwrap();
+        (m2, serde_json::to_value(c.module3()).unwrap(), verdict)
     };
     let reference = Calibrate::new(&cfg).run(&plain, &exps).unwrap();
     let first = Calibrate::new(&cfg).run(&memo, &exps).unwrap();
@@ -679,7 +680,9 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
     // Both checks below go through this closure; it holds the same `json(rerun) == json(full)`
     // assertion each of them had written out before (folded, not changed).
     let rerun_equals_run = |params: &bamudi::CalibrationConfig, base: &bamudi::Surrogate| {
-        let rerun = Calibrate::new(params).run_on(&memo, &exps, base).unwrap();
+        let rerun = Calibrate::new(params)
+            .run_with_surrogate(&memo, &exps, base)
+            .unwrap();
         let full = Calibrate::new(params).run(&plain, &exps).unwrap();
         assert!(json(&rerun) == json(&full));
         full
@@ -696,6 +699,23 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         json(&full).0
     );
     rerun_equals_run(&conditional, &alone);
+    // the marginal mode (the default, the reproduction's headline) on the paper mode's
+    rerun_equals_run(&cfg, &full.surrogate());
+    // other outputs at the same inputs, or other inputs, are other data: refused
+    let refused = |x: DMatrix<f64>, y: DMatrix<f64>, what: &str| {
+        let names = (exps.input_names.clone(), exps.output_names.clone());
+        let other = Experiments::new(names.0, names.1, x, y).unwrap();
+        let err = Calibrate::new(&conditional)
+            .run_with_surrogate(&memo, &other, &alone)
+            .unwrap_err();
+        assert!(err.to_string().contains(what), "{err}");
+    };
+    let mut y = exps.y.clone();
+    y[(3, 1)] += 1e-9;
+    refused(exps.x.clone(), y, "experiment outputs differ");
+    let mut x = exps.x.clone();
+    x[(3, 0)] += 1e-9;
+    refused(x, exps.y.clone(), "experiment inputs differ");
     // a configuration whose Module 2 would differ is refused, not run on the old one
     let ridge = conditional
         .into_params()
@@ -703,7 +723,7 @@ fn row_memo_and_module3_reruns_change_no_calibration() {
         .check()
         .unwrap();
     let err = Calibrate::new(&ridge)
-        .run_on(&memo, &exps, &full.surrogate())
+        .run_with_surrogate(&memo, &exps, &full.surrogate())
         .unwrap_err();
     assert!(err.to_string().contains("estimator differs"), "{err}");
 }
@@ -736,12 +756,12 @@ fn each_mode_saves_and_reads_its_own_fit() {
     let mut saved = Vec::new();
     for (mode, cal) in in_each_mode(&model, &exps) {
         let m3 = cal.module3();
-        assert_eq!(m3.mode.coefficient_mode(), mode.kind());
+        assert_eq!(m3.mode.kind(), mode.kind());
         match (&m3.mode, &mode) {
             (ModeFit::PriorMarginal, CoefficientMode::PriorMarginal)
             | (ModeFit::ConditionalOnTheta(_), CoefficientMode::ConditionalOnTheta)
             | (ModeFit::Marginal(_), CoefficientMode::Marginal(_)) => {}
-            (fit, _) => panic!("{mode:?} fitted {:?}", fit.coefficient_mode()),
+            (fit, _) => panic!("{mode:?} fitted {:?}", fit.kind()),
         }
         let text = cal.to_json_string().unwrap();
         let value: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -749,7 +769,7 @@ fn each_mode_saves_and_reads_its_own_fit() {
         // ordered by key, so they are read off the text)
         assert_eq!(top_level_keys(&text, "\"module3\":{"), layout, "{mode:?}");
         let again = bamudi::Calibration::from_json_str(&text, "saved").unwrap();
-        assert_eq!(again.module3().mode.coefficient_mode(), mode.kind());
+        assert_eq!(again.module3().mode.kind(), mode.kind());
         // the configuration holds the marginal mode's prior in that mode only
         let prior = value["config"].get("marginal");
         assert_eq!(prior.is_some(), mode.marginal_prior().is_some(), "{mode:?}");

@@ -230,7 +230,8 @@ def calibrate_model(
     arrays, a DataFrame or dict of columns named as the model's inputs and outputs, or an array
     with ``columns`` — through the engine (``bamudi::Calibrate``, the gate's code). ``config``:
     a dict, TOML text or TOML file with the keys of the engine's ``CalibrationParams``
-    (``estimator``, ``coefficients``, ``sampling``, ``theta_grid_points``, ``marginal``, ...;
+    (``estimator``, ``coefficients``, ``sampling``, ``theta_grid_points``, ``marginal`` (only with
+    the marginal mode), ...;
     ``None``: the engine's defaults, i.e. the marginal mode and the exact linear estimator (no
     training set); the paper's LSTM with ``{"estimator": {"kind": "lstm"}}``); ``seed``
     replaces its seed."""
@@ -268,7 +269,8 @@ class ModelCalibration:
 
     @property
     def config(self) -> dict:
-        """The checked engine configuration used (every key, defaults filled in)."""
+        """The checked engine configuration used (every key, defaults filled in; ``marginal``
+        only in the marginal mode, whose settings it is: to change the mode of a copy, drop it)."""
         return json.loads(self._native.config_json())
 
     @property

@@ -24,7 +24,7 @@ with θ profiled instead of marginalised (see docs/equations.md). Same data, sam
 pub(super) const HEADLINE_NOTE: &str = "## Headline: the default mode (marginal coefficients, not in the paper)\n\n\
 The discrepancy coefficients are integrated out under a Gaussian-process prior that is isotropic \
 in force units, ρ over its uniform prior, and Module 4 carries θ, ρ and every coefficient direction \
-(`CoefficientMode::Marginal`, crates/bamudi/src/module3/marginal). Its intervals are the ones the \
+(`CoefficientMode::Marginal`, crates/bamudi/src/posterior/marginal). Its intervals are the ones the \
 validation protocol checks (docs/results/validation.md). Same data and estimator as the paper's \
 Module 3 below.\n\n";
 

@@ -433,7 +433,7 @@ fn calibration_params(opts: &ReproduceOptions, sampling: SamplingRule) -> Calibr
 }
 
 /// Re-runs Module 3 of a finished calibration with another coefficient mode (same estimator,
-/// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::run_on`] its surrogate) and scores it
+/// `ρ*`, `α̂` and coefficient GPs, same data: [`Calibrate::run_with_surrogate`] its surrogate) and scores it
 /// like the main run; returns the scores and the variant's calibration. `mode` carries its
 /// settings (the marginal mode its prior).
 fn run_variant(
@@ -450,10 +450,11 @@ fn run_variant(
         .into_params()
         .coefficients(mode)
         .check()?;
-    let cond =
-        Calibrate::new(&cfg)
-            .observer(observer)
-            .run_on(&s.model, &s.exps, &cal.surrogate())?;
+    let cond = Calibrate::new(&cfg).observer(observer).run_with_surrogate(
+        &s.model,
+        &s.exps,
+        &cal.surrogate(),
+    )?;
     let seconds = t.elapsed().as_secs_f64();
     let scores = score(&s.model, &cond, &s.scenario, s.contact, &s.new_x)?;
     let result = ConditionalResult {

@@ -124,7 +124,8 @@ pub(super) fn study(
                 cal
             }
         };
-        let cal = Calibrate::new(&conditional).run_on(model, &sub, &paper_cal.surrogate())?;
+        let cal =
+            Calibrate::new(&conditional).run_with_surrogate(model, &sub, &paper_cal.surrogate())?;
         rows.push(row("conditional coefficients", &cal));
     }
     Ok(rows)

@@ -950,6 +950,14 @@ fn calibrate_config_files(base: &Base) -> Vec<Case> {
             ),
             &["tolerances", "marginal"],
         ),
+        // the marginal mode's own section beside another mode, even at its defaults
+        cfg(
+            "marginal_section_outside_the_marginal_mode",
+            &format!(
+                "{PRIOR}[calibration]\ncoefficients = \"prior_marginal\"\n[calibration.marginal]\nlevel_variance = 0\n"
+            ),
+            &["marginal", "prior_marginal"],
+        ),
         // discrepancy_terms, each in [1, 20]
         cfg(
             "terms_zero",

@@ -33,8 +33,8 @@ pub struct ConditionalFit {
 }
 
 impl ModeFit {
-    /// The coefficient mode this fit belongs to.
-    pub fn coefficient_mode(&self) -> ModeKind {
+    /// The coefficient mode this fit belongs to (without its settings).
+    pub fn kind(&self) -> ModeKind {
         match self {
             Self::PriorMarginal => ModeKind::PriorMarginal,
             Self::ConditionalOnTheta(_) => ModeKind::ConditionalOnTheta,

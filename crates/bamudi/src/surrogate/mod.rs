@@ -68,6 +68,10 @@ pub struct Module2 {
     pub alpha_hat: DMatrix<f64>,
     /// The coefficient GPs (Eq. 33-37).
     pub gps: CoefficientGps,
+    /// A digest of the experiment outputs it was fitted to (`None` in files saved before it
+    /// was recorded), checked before Module 3 runs on it ([`Surrogate`]).
+    #[serde(default)]
+    pub(crate) outputs_digest: Option<u64>,
 }
 
 /// The Eq.-27 training set, when the configured estimator needs one.
