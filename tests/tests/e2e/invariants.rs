@@ -869,3 +869,88 @@ fn the_engine_public_api_is_small() {
     assert!(user <= 232, "{user} public items outside `internals`");
     assert!(internal <= 60, "{internal} items in `internals`");
 }
+
+/// Architecture Invariant: every file in `docs/results/` is listed in its index
+/// (`docs/results/README.md`), so a reader finds what each result is and the command that
+/// writes it. An entry is a code span in the first cell of an index table's row; `{a,b}`
+/// alternatives, `<name>` and `*` stand for any text.
+#[test]
+fn every_results_file_is_in_the_index() {
+    let dir = root().join("docs").join("results");
+    let index = std::fs::read_to_string(dir.join("README.md")).expect("the results index");
+    let patterns: Vec<String> = index
+        .lines()
+        .filter_map(|l| l.strip_prefix('|')?.split('|').next())
+        .flat_map(|cell| cell.split('`').skip(1).step_by(2).map(str::to_string))
+        .flat_map(|p| alternatives(&p))
+        .collect();
+    let mut missing = Vec::new();
+    let mut stack = vec![dir.clone()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).expect("a results folder") {
+            let path = entry.expect("a folder entry").path();
+            if path.is_dir() {
+                stack.push(path);
+                continue;
+            }
+            let rel = path.strip_prefix(&dir).expect("inside docs/results");
+            let rel = rel.to_string_lossy().replace('\\', "/");
+            if rel != "README.md" && !patterns.iter().any(|p| wildcard_match(p, &rel)) {
+                missing.push(rel);
+            }
+        }
+    }
+    missing.sort();
+    assert!(
+        missing.is_empty(),
+        "not in docs/results/README.md: {missing:?}"
+    );
+    // the matcher itself, on the index's own forms
+    assert!(wildcard_match(
+        "scenario-*/results.json",
+        "scenario-2/results.json"
+    ));
+    assert!(!wildcard_match("coverage.md", "coverage-quick.md"));
+    assert_eq!(alternatives("a{b,c}.d").len(), 2);
+}
+
+/// `pattern` with each `{a,b}` expanded and each `<name>` made a `*`.
+fn alternatives(pattern: &str) -> Vec<String> {
+    let Some(open) = pattern.find('{') else {
+        let mut out = String::new();
+        let mut in_name = false;
+        for c in pattern.chars() {
+            match (c, in_name) {
+                ('<', _) => (in_name, out) = (true, out + "*"),
+                ('>', true) => in_name = false,
+                (_, true) => {}
+                (c, false) => out.push(c),
+            }
+        }
+        return vec![out];
+    };
+    let close = open
+        + pattern[open..]
+            .find('}')
+            .unwrap_or(pattern.len() - open - 1);
+    let (head, tail) = (&pattern[..open], &pattern[close + 1..]);
+    pattern[open + 1..close]
+        .split(',')
+        .flat_map(|alt| alternatives(&format!("{head}{alt}{tail}")))
+        .collect()
+}
+
+/// Whether `text` matches `pattern`, where `*` stands for any text.
+fn wildcard_match(pattern: &str, text: &str) -> bool {
+    match pattern.split_once('*') {
+        None => pattern == text,
+        Some((head, rest)) => {
+            let Some(after) = text.strip_prefix(head) else {
+                return false;
+            };
+            (0..=after.len())
+                .filter(|&i| after.is_char_boundary(i))
+                .any(|i| wildcard_match(rest, &after[i..]))
+        }
+    }
+}
