@@ -553,7 +553,7 @@ impl Factorisations {
             let req = StackReq::any_of(&[
                 lu_factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default()),
                 lu_solve::solve_in_place_scratch::<usize, f64>(n, 1, Par::Seq),
-                llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, Default::default()),
+                llt::factor::cholesky_in_place_scratch::<f64>(n, Par::Seq, llt_params().into()),
                 llt::solve::solve_in_place_scratch::<f64>(n, 1, Par::Seq),
             ]);
             self.buf = Some(MemBuffer::new(req));
@@ -575,7 +575,7 @@ impl Factorisations {
             Default::default(),
             Par::Seq,
             MemStack::new(buf),
-            Default::default(),
+            llt_params().into(),
         )
         .map_err(|e| match e {
             llt::factor::LltError::NonPositivePivot { index } => index,
@@ -612,6 +612,21 @@ impl Factorisations {
             MemStack::new(buf),
         );
     }
+}
+
+/// Below this size faer's Cholesky factors a diagonal block without splitting it further.
+/// faer's default, 64, leaves the contact matrix (`2m = 156` on the default gate) two
+/// unblocked 64-column leaves; 16 makes more of its work matrix products. Measured on a
+/// 156 x 156 SPD matrix (release, one thread, 20,000 factorisations each): 30.5 µs with the
+/// default, 25.3-26.0 µs with 16 (block size 32, 64 or 128 alike); the factors differ in
+/// rounding only.
+const LLT_RECURSION_THRESHOLD: usize = 16;
+
+/// faer's Cholesky parameters with [`LLT_RECURSION_THRESHOLD`].
+fn llt_params() -> llt::factor::LltParams {
+    let mut params: llt::factor::LltParams = faer::Auto::<f64>::auto();
+    params.recursion_threshold = LLT_RECURSION_THRESHOLD;
+    params
 }
 
 thread_local! {
