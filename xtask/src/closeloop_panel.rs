@@ -110,6 +110,12 @@ pub struct PanelArgs {
     /// folder as `<kind>-<magnitude>-<onset>-<seed>.json`, for reading one record in full.
     #[arg(long)]
     reports: Option<PathBuf>,
+    /// The loop's settings: a close-loop configuration (TOML, the format `bamudi close-loop
+    /// --config` reads; missing keys take their defaults), for comparing a setting on the
+    /// same records. Its file name enters each record's key, so a panel run with it neither
+    /// skips nor overwrites the records run without it.
+    #[arg(long)]
+    config: Option<PathBuf>,
 }
 
 /// One record's score.
@@ -309,10 +315,17 @@ fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
 /// What identifies a record in the progress file: its cell, its seed and the settings that
 /// change its outcome.
 fn record_key(kind: &str, magnitude: &str, onset: &str, seed: u64, args: &PanelArgs) -> String {
-    format!(
+    let key = format!(
         "{kind}/{magnitude}/{onset}/{seed}/mesh {}/step {}/draws {:?}",
         args.mesh, args.step_minutes, args.draws
-    )
+    );
+    match &args.config {
+        Some(p) => format!(
+            "{key}/config {}",
+            p.file_name().unwrap_or(p.as_os_str()).to_string_lossy()
+        ),
+        None => key,
+    }
 }
 
 /// The records already in the progress file, by key (none when it does not exist).
@@ -679,7 +692,16 @@ fn one(
         gap_end,
         oracle,
     } = prepare(args, contact, kind, magnitude, onset, seed)?;
-    let mut cfg = gate::close_loop_config(CloseLoopConfig::default(), &rec);
+    let base = match &args.config {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("--config: reading {}", p.display()))?;
+            bamudi_gate::session::close_loop_config_from_toml(&text)
+                .with_context(|| format!("--config {}", p.display()))?
+        }
+        None => CloseLoopConfig::default(),
+    };
+    let mut cfg = gate::close_loop_config(base, &rec);
     if let Some(d) = args.draws {
         cfg.sensor.uncertainty_draws = d;
     }
