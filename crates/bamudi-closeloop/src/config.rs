@@ -482,7 +482,7 @@ pub struct SensorConfig {
     pub penalty_per_change_ln_n: f64,
     /// Fewest rows a stuck reading must repeat, and a noise change must last [12].
     pub min_span_rows: usize,
-    /// Smallest ratio of noise sd after / before for a gauge to be set aside [2].
+    /// Smallest ratio of noise sd after / before for a gauge to be set aside [1.5].
     pub noise_ratio: f64,
     /// Draws of the accepted effects' and corrections' parameters propagated to `θ` (one
     /// calibration each; 0 = the last calibration's posterior alone) [4].
@@ -501,7 +501,7 @@ impl Default for SensorConfig {
             enabled: true,
             penalty_per_change_ln_n: 3.0,
             min_span_rows: 12,
-            noise_ratio: 2.0,
+            noise_ratio: 1.5,
             uncertainty_draws: 4,
             seed: 58,
             onset_effects: true,
