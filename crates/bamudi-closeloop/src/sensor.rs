@@ -1701,6 +1701,7 @@ mod tests {
     /// - gauge 2's residual carries a misfit `0.03 |fitted|` that grows with the swing (not a
     ///   gain: `|fitted|` has no slope on `fitted` over whole cycles): its differences grow
     ///   on the ramps only, the hold rows show no growth, and it is load motion, not noise.
+    ///
     /// The load test is also called directly with the growth it would be handed (2 ln 3 and
     /// 2 ln 2), so that the second record's empty scan is the test's answer and not a change
     /// the scan did not see.
