@@ -928,7 +928,7 @@ fn moves_with_the_load(
     size: f64,
     cfg: &SensorConfig,
 ) -> bool {
-    use numerics::robust::median;
+    use numerics::robust::{mad, median};
     let (r, m) = (inp.residual, inp.fitted);
     let n = r.nrows();
     let mut steps: Vec<f64> = (1..n).map(|i| (m[(i, g)] - m[(i - 1, g)]).abs()).collect();
@@ -950,12 +950,7 @@ fn moves_with_the_load(
     if inside.len() < cfg.min_span_rows / 2 || outside.len() < cfg.min_span_rows {
         return false;
     }
-    let spread = |d: &mut Vec<f64>| {
-        let c = median(d);
-        let mut dev: Vec<f64> = d.iter().map(|v| (v - c).abs()).collect();
-        median(&mut dev)
-    };
-    let (s_in, s_out) = (spread(&mut inside), spread(&mut outside));
+    let (s_in, s_out) = (mad(&mut inside), mad(&mut outside));
     s_out > 0.0 && s_in / s_out < (0.25 * size).exp()
 }
 
@@ -1056,13 +1051,14 @@ pub(crate) fn attribute_span(
         .filter(|_| sensor_wins)
         // a change up to a day is dated by its span's end, which the scan set
         .map(|f| match span.1 == inp.residual.nrows() {
-            true => refine_onset(inp, f),
+            true => step_or_earlier_drift(inp, refine_onset(inp, f)),
             false => f,
         })
         .filter(|f| f.from_row >= inp.earliest)
         .map(|mut f| {
+            let redrawn = std::mem::take(&mut f.evidence);
             f.evidence = format!(
-                "{subject} from day {:.2}: {hypothesis} explains the change better than a change of the parameter (residual sum of squares {sensor:.0} + penalty {penalty:.1} against {structure:.0} noise variances)",
+                "{subject} from day {:.2}: {hypothesis} explains the change better than a change of the parameter (residual sum of squares {sensor:.0} + penalty {penalty:.1} against {structure:.0} noise variances){redrawn}",
                 test.from_day
             );
             f
@@ -1340,6 +1336,82 @@ fn refine_onset(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
         from_day: inp.day(from),
         size: Some(xr / xx),
         size_sd: Some((var / xx).sqrt()),
+        ..f
+    }
+}
+
+/// A step found on one gauge, or a drift that began before it: a slow drift is first seen as
+/// a level shift days after it began, and from there a step fits the drift's mean over the
+/// remaining rows but not its slope (the step's correction then leaves a ramp in the test
+/// window). The step (onset within [`ONSET_SEARCH_DAYS`] of its own, as refined) against the
+/// best drift `size · (t − t₀)` with onset `t₀` anywhere from the first row a finding may
+/// start at to [`ONSET_SEARCH_DAYS`] after the step's, both scored by the residual sum of
+/// squares they leave on the gauge's rows from the earliest of those onsets, over the noise
+/// variance of the rows before the step. Each fits one size and one onset; the drift chose
+/// among more onsets and pays `2 ln` of the ratio of the two counts. A drift that wins is
+/// returned dated and sized at its own onset; otherwise the step as it was.
+fn step_or_earlier_drift(inp: &ScanInput<'_>, f: SensorFinding) -> SensorFinding {
+    if f.kind != SensorKind::Step || f.gauge_columns.len() != 1 {
+        return f;
+    }
+    let (r, t) = (inp.residual, &inp.rec.time_h);
+    let (n, g, s) = (r.nrows(), f.gauge_columns[0], f.from_row);
+    let window = ONSET_SEARCH_DAYS * 24.0;
+    let within = |i: usize| (t[i] - t[s]).abs() <= window;
+    let step_onsets = (0..n).filter(|&i| i >= inp.earliest && within(i)).count();
+    let last = (s..n)
+        .take_while(|&i| t[i] - t[s] <= window)
+        .last()
+        .unwrap_or(s);
+    let lo = inp.earliest.min(s);
+    if last + 2 >= n || step_onsets == 0 {
+        return f;
+    }
+    // suffix sums over rows i..n of r, t·r, t, t² and the count
+    let mut suf = vec![[0.0f64; 5]; n + 1];
+    for i in (0..n).rev() {
+        let (x, y) = (t[i] / 24.0, r[(i, g)]);
+        let a = suf[i + 1];
+        suf[i] = [a[0] + y, a[1] + x * y, a[2] + x, a[3] + x * x, a[4] + 1.0];
+    }
+    let step_explained = {
+        let [sr, .., cnt] = suf[s];
+        sr * sr / cnt
+    };
+    // drift from row j: x = t − t_j on rows j..n
+    let drift = |j: usize| {
+        let [sr, str_, st, stt, cnt] = suf[j];
+        let tj = t[j] / 24.0;
+        let xr = str_ - tj * sr;
+        let xx = stt - 2.0 * tj * st + tj * tj * cnt;
+        (xx > 0.0).then(|| (xr * xr / xx, xr, xx))
+    };
+    let best = (lo..=last)
+        .filter_map(|j| drift(j).map(|d| (j, d)))
+        .max_by(|a, b| a.1.0.total_cmp(&b.1.0));
+    let Some((from, (explained, xr, xx))) = best else {
+        return f;
+    };
+    let var = noise_var(r, quiet_rows(s, n))[g];
+    let drift_onsets = last + 1 - lo;
+    let penalty = 2.0 * (drift_onsets as f64 / step_onsets as f64).max(1.0).ln();
+    if (explained - step_explained) / var <= penalty {
+        return f;
+    }
+    let evidence = format!(
+        "; as a drift from day {:.2} rather than a step from day {:.2}: it leaves {:.1} noise variances less on the gauge (penalty {penalty:.1} for choosing among {drift_onsets} onsets against {step_onsets})",
+        inp.day(from),
+        f.from_day,
+        (explained - step_explained) / var
+    );
+    SensorFinding {
+        kind: SensorKind::Drift,
+        from_row: from,
+        evidence,
+        from_day: inp.day(from),
+        size: Some(xr / xx),
+        size_sd: Some((var / xx).sqrt()),
+        unit: format!("{} per day", inp.unit),
         ..f
     }
 }
@@ -1830,6 +1902,57 @@ mod tests {
         );
         let (_, mask) = apply(&f, &y, &fitted, &rec.time_h, None);
         assert_eq!(mask.iter().filter(|m| **m).count(), 50);
+    }
+
+    /// A drift of 0.1 microstrain per day from day 30 on one gauge of a 60-day hourly record,
+    /// tested from day 44 (where a level-shift scan first sees so slow a drift): a drift, dated
+    /// within 3 days of day 30 and sized within 4 of its sds, not a step from day 44 (which
+    /// fits the ramp's mean and leaves its slope). A step of 1 microstrain from day 44 on the
+    /// same noise stays a step from day 44 (within a day): the drift's extra onsets do not buy
+    /// it a step. Tolerances: with unit noise the drift's onset is resolved to about a day and
+    /// its rate to 0.002 per day (its sd), so both bounds hold with room and a step verdict
+    /// would fail the first.
+    #[test]
+    fn a_drift_seen_late_is_a_drift_from_its_own_onset_and_a_step_stays_a_step() {
+        let n = 1440;
+        let sens = DMatrix::from_fn(n, 4, |_, g| [0.8, -0.5, 0.3, 1.1][g]);
+        let fitted = DMatrix::from_fn(n, 4, |i, g| {
+            20.0 * (g as f64 + 1.0) * (1.0 + (i as f64 / 9.0).sin())
+        });
+        let rec = record(fitted.clone());
+        let (onset, seen) = (720, 1056);
+        let r = DMatrix::from_fn(n, 4, |i, g| {
+            wiggle(i, g)
+                + if g == 1 && i >= onset {
+                    0.1 * (i - onset) as f64 / 24.0
+                } else {
+                    0.0
+                }
+        });
+        let inp = input(&rec, &r, &fitted);
+        let (t, f) = attribute("gap alarm", &inp, &sens, seen);
+        assert_eq!(t.verdict, "sensor", "{t:?}");
+        let f = f.expect("a finding");
+        assert_eq!(
+            (f.kind, f.gauges[0].as_str()),
+            (SensorKind::Drift, "SG2"),
+            "{f:?}"
+        );
+        assert!((f.from_day - 30.0).abs() <= 3.0, "{f:?}");
+        let (size, sd) = (f.size.unwrap(), f.size_sd.unwrap());
+        assert!((size - 0.1).abs() <= 4.0 * sd, "{f:?}");
+        assert!(f.unit.ends_with("per day"), "{f:?}");
+        let r = DMatrix::from_fn(n, 4, |i, g| {
+            wiggle(i, g) + if g == 1 && i >= seen { 1.0 } else { 0.0 }
+        });
+        let inp = ScanInput {
+            residual: &r,
+            ..inp
+        };
+        let (_, f) = attribute("gap alarm", &inp, &sens, seen);
+        let f = f.expect("a finding");
+        assert_eq!(f.kind, SensorKind::Step, "{f:?}");
+        assert!((f.from_day - 44.0).abs() <= 1.0, "{f:?}");
     }
 
     #[test]

@@ -323,9 +323,7 @@ fn normal_quantile(p: f64) -> f64 {
 /// Squared MAD scale of the lag-`k` differences.
 fn mad_variance(x: &[f64], k: usize) -> f64 {
     let mut d: Vec<f64> = x.windows(k + 1).map(|w| w[k] - w[0]).collect();
-    let med = crate::robust::median(&mut d);
-    let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
-    (crate::robust::median(&mut dev) / 0.6745).powi(2)
+    (crate::robust::mad(&mut d) / 0.6745).powi(2)
 }
 
 fn check_finite(x: &[f64]) -> Result<(), NumericsError> {

@@ -19,6 +19,19 @@ pub fn median(v: &mut [f64]) -> f64 {
     }
 }
 
+/// Median absolute deviation from the median, unscaled (sorts `v` in place; 0 when `v` is
+/// empty). Divide by 0.6745 for a normal sd.
+///
+/// ```
+/// assert_eq!(numerics::robust::mad(&mut [1.0, 2.0, 3.0, 4.0, 100.0]), 1.0);
+/// assert_eq!(numerics::robust::mad(&mut []), 0.0);
+/// ```
+pub fn mad(v: &mut [f64]) -> f64 {
+    let med = median(v);
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - med).abs()).collect();
+    median(&mut dev)
+}
+
 /// Robust white-noise standard deviation of a series: the median absolute deviation of its
 /// first differences over `0.6745 √2`. Slow effects (drift, seasons) barely change first
 /// differences, and rare jumps are outliers the median ignores.
@@ -36,7 +49,5 @@ pub fn noise_sd_from_differences(r: &[f64]) -> f64 {
     if d.is_empty() {
         return 0.0;
     }
-    let med = median(&mut d);
-    let mut dev: Vec<f64> = d.iter().map(|v| (v - med).abs()).collect();
-    median(&mut dev) / 0.6745 / std::f64::consts::SQRT_2
+    mad(&mut d) / 0.6745 / std::f64::consts::SQRT_2
 }
