@@ -1205,7 +1205,7 @@ pub(super) fn cal_end(lp: &Loop<'_>) -> usize {
 }
 
 /// Days within which one-gauge findings on different gauges count as one change.
-const COINCIDENT_DAYS: f64 = 1.0;
+pub(super) const COINCIDENT_DAYS: f64 = 1.0;
 
 /// One-gauge findings (step, drift, gain change) whose onsets fall within [`COINCIDENT_DAYS`]
 /// of a finding on another gauge are one change seen on several gauges, which is what a change

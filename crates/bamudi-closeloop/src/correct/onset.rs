@@ -171,27 +171,44 @@ fn offered(e: &dyn Effect) -> bool {
 /// The onsets to test: after the calibration window, the alarms of the scan that coincide with
 /// an alarm on another gauge, the earliest of each group (groups a day apart), at most
 /// [`MAX_ONSETS`]. Returns `(row, day, gauges)`.
+///
+/// Two alarms coincide when their onset intervals overlap (the scan's own mark) or when their
+/// onsets lie within [`COINCIDENT_DAYS`](super::COINCIDENT_DAYS) of each other, the span within
+/// which the one-gauge findings count as one change. The scan dates a change as a step, and
+/// an effect that is not one (a response to the lock's cycle that begins on a day, weaker on
+/// one gauge) is dated hours apart on its gauges with intervals that need not overlap.
 fn onsets(
     rec: &MeasuredRecord,
     events: &crate::EventScan,
     first: usize,
 ) -> Vec<(usize, f64, Vec<String>)> {
-    let mut out: Vec<(usize, f64, Vec<String>)> = vec![];
-    for a in events
+    let row_of = |day: f64| rec.time_h.iter().position(|&t| t / 24.0 >= day);
+    let after: Vec<_> = events
         .alarms
         .iter()
-        .filter(|a| !a.coincident_gauges.is_empty())
-    {
-        let Some(row) = rec.time_h.iter().position(|&t| t / 24.0 >= a.onset_day) else {
+        .filter(|a| row_of(a.onset_day).is_some_and(|r| r >= first))
+        .collect();
+    let mut out: Vec<(usize, f64, Vec<String>)> = vec![];
+    for a in &after {
+        let Some(row) = row_of(a.onset_day) else {
             continue;
         };
-        if row < first || out.iter().any(|o| (o.1 - a.onset_day).abs() <= 1.0) {
+        if out.iter().any(|o| (o.1 - a.onset_day).abs() <= 1.0) {
             continue;
         }
         let mut gauges = vec![a.gauge.clone()];
         gauges.extend(a.coincident_gauges.iter().cloned());
+        gauges.extend(
+            after
+                .iter()
+                .filter(|b| (b.onset_day - a.onset_day).abs() <= super::COINCIDENT_DAYS)
+                .map(|b| b.gauge.clone()),
+        );
         gauges.sort();
         gauges.dedup();
+        if gauges.len() < 2 {
+            continue;
+        }
         out.push((row, a.onset_day, gauges));
         if out.len() == MAX_ONSETS {
             break;
@@ -330,12 +347,14 @@ fn best_effect(
         };
         let mut c = f.term.contribution(&ctx)?;
         super::zero_masked(&mut c, &post.mask);
-        // the fitted values, less the onset day itself
+        // the fitted values, less the onset day itself; a coefficient a term leaves out on a
+        // gauge (exactly zero there, as the operational response's on gauges it does not
+        // help) is not one
         let p: usize = f
             .report
             .parameters
             .iter()
-            .map(|b| b.values.len())
+            .map(|b| b.values.iter().filter(|v| **v != 0.0).count())
             .sum::<usize>()
             - 1;
         let score = scores.with_removed(&c) + p as f64 * ln + choice;

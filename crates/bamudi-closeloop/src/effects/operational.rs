@@ -11,7 +11,9 @@
 //! lagged and decaying responses (up to about a day and a half) that none of them is. Each
 //! train starts at its steady state (the calibration rows' event rate times `τ`), not at zero,
 //! so that the events before the record do not leave a ramp over its first days. One train is
-//! chosen, whole, by BIC (each column costs one coefficient per gauge); the loop then accepts
+//! chosen, whole, by BIC (each column costs one coefficient per gauge that takes it: a gauge takes
+//! the train's columns only when they lower its own BIC, and keeps a constant alone otherwise, so
+//! that a response seen on two gauges of seven is not made to pay on all seven); the loop then accepts
 //! the term like every other effect, once: only when it lowers the rolling-origin
 //! cross-validated error by its margin.
 
@@ -79,7 +81,23 @@ impl Effect for OperationalResponse {
             cols.iter()
                 .map(|c| (0..n).map(|i| c.z(i)).collect::<Vec<f64>>()),
         );
-        let term = LinearTerm::fit(Basis::Columns(basis), ctx, r);
+        let mut term = LinearTerm::fit(Basis::Columns(basis), ctx, r);
+        // a gauge the columns do not help keeps its constant alone (the columns' coefficients
+        // zero there, its constant the mean of its residual on the calibration rows)
+        let helped = gauges_helped(ctx, r, &groups, &chosen);
+        if helped.iter().any(|h| !h) {
+            let n = ctx.cal.len() as f64;
+            for (g, _) in helped.iter().enumerate().filter(|(_, h)| !**h) {
+                term.coef.column_mut(g).fill(0.0);
+                term.coef[(0, g)] = ctx.cal.iter().map(|&i| r[(i, g)]).sum::<f64>() / n;
+            }
+            let c = term.basis.matrix(ctx.feats) * &term.coef;
+            term.sse = ctx
+                .cal
+                .iter()
+                .map(|&i| (r.row(i) - c.row(i)).norm_squared())
+                .sum();
+        }
         let mut p = vec![term.parameter(0, "intercept", ctx.unit)];
         for (k, c) in cols.iter().enumerate() {
             let name = format!("per_sd_of_{} (sd = {:.4})", c.name, c.sd);
@@ -99,9 +117,14 @@ impl Effect for OperationalResponse {
 /// A group of candidate columns chosen together: its name (an event train) and its columns.
 type Group = (String, Vec<Candidate>);
 
-/// BIC of the least-squares fit of `r` on the calibration rows on a constant and the columns
-/// of `chosen`: `Σ_g n ln(SSE_g / n) + (1 + columns) · gauges · ln n`.
-fn bic(ctx: &FitContext<'_>, r: &DMatrix<f64>, groups: &[Group], chosen: &[usize]) -> f64 {
+/// Each gauge's BIC of the least-squares fit of `r` on the calibration rows on a constant and
+/// the columns of `chosen`: `n ln(SSE_g / n) + (1 + columns) ln n`.
+fn gauge_bic(
+    ctx: &FitContext<'_>,
+    r: &DMatrix<f64>,
+    groups: &[Group],
+    chosen: &[usize],
+) -> Vec<f64> {
     let cols: Vec<&Candidate> = chosen.iter().flat_map(|&g| &groups[g].1).collect();
     let rows = ctx.cal;
     let x = DMatrix::from_fn(rows.len(), cols.len() + 1, |i, j| match j {
@@ -111,10 +134,37 @@ fn bic(ctx: &FitContext<'_>, r: &DMatrix<f64>, groups: &[Group], chosen: &[usize
     let y = r.select_rows(rows.iter());
     let res = &y - &x * ols(&x, &y);
     let n = rows.len() as f64;
-    let fit: f64 = (0..res.ncols())
-        .map(|j| n * (res.column(j).norm_squared() / n).max(1e-300).ln())
-        .sum();
-    fit + ((cols.len() + 1) * r.ncols()) as f64 * n.ln()
+    (0..res.ncols())
+        .map(|j| {
+            n * (res.column(j).norm_squared() / n).max(1e-300).ln()
+                + (cols.len() + 1) as f64 * n.ln()
+        })
+        .collect()
+}
+
+/// BIC of the fit of `r` on the columns of `chosen` where each gauge takes them only when they
+/// lower its own BIC (a constant alone otherwise): the sum over the gauges of the lower of the
+/// two. A response to the lock's cycle need not show on every gauge, and a term that made every
+/// gauge pay for its columns would be chosen only when it is strong on most of them.
+fn bic(ctx: &FitContext<'_>, r: &DMatrix<f64>, groups: &[Group], chosen: &[usize]) -> f64 {
+    let without = gauge_bic(ctx, r, groups, &[]);
+    if chosen.is_empty() {
+        return without.iter().sum();
+    }
+    let with = gauge_bic(ctx, r, groups, chosen);
+    with.iter().zip(&without).map(|(a, b)| a.min(*b)).sum()
+}
+
+/// The gauges whose own BIC the columns of `chosen` lower ([`bic`]).
+fn gauges_helped(
+    ctx: &FitContext<'_>,
+    r: &DMatrix<f64>,
+    groups: &[Group],
+    chosen: &[usize],
+) -> Vec<bool> {
+    let without = gauge_bic(ctx, r, groups, &[]);
+    let with = gauge_bic(ctx, r, groups, chosen);
+    with.iter().zip(&without).map(|(a, b)| a < b).collect()
 }
 
 /// Forward selection of whole groups by BIC, at most [`MAX_TRAINS`].
