@@ -25,7 +25,7 @@
 //! | the gap changed (a step or a ramp of the parameter) | 1 | 2 |
 //! | one sensor (a step, drift or gain on one gauge; an exchange) | 1 | the test's `m` |
 //! | a level change on every gauge | gauges | 1 |
-//! | a library effect from the onset | its fitted values | effects tried |
+//! | a library effect from the onset | its fitted values (not those left at exactly zero on a gauge) | effects tried |
 //!
 //! The effect is added only when it wins. It is then one of the loop's effects (named as the
 //! library names it, with `onset_day` among its parameters), so that the scans, the track and
@@ -347,14 +347,18 @@ fn best_effect(
         };
         let mut c = f.term.contribution(&ctx)?;
         super::zero_masked(&mut c, &post.mask);
-        // the fitted values, less the onset day itself; a coefficient a term leaves out on a
-        // gauge (exactly zero there, as the operational response's on gauges it does not
-        // help) is not one
+        // the fitted values, less the onset day itself; in a block of one coefficient per
+        // gauge, a coefficient the term leaves out on a gauge (exactly zero there, as the
+        // operational response's on gauges it does not help) is not one
+        let gauges = post.y.ncols();
         let p: usize = f
             .report
             .parameters
             .iter()
-            .map(|b| b.values.iter().filter(|v| **v != 0.0).count())
+            .map(|b| match b.values.len() == gauges {
+                true => b.values.iter().filter(|v| **v != 0.0).count(),
+                false => b.values.len(),
+            })
             .sum::<usize>()
             - 1;
         let score = scores.with_removed(&c) + p as f64 * ln + choice;

@@ -364,7 +364,8 @@ fn cycle_locked_late_on_two(truth: &ToyGate, seed: u64) -> (f64, FieldRecord) {
 /// Day the late response begins (of 60; the test window starts at day 48).
 const LATE_ONSET_DAY: f64 = 50.0;
 
-/// Seeds of the late two-gauge records (validation only; not run before the bounds were set).
+/// Seeds of the late two-gauge records (not run before the first bound was set; the test's
+/// comment says how the bound changed after the first run).
 const LATE_SEEDS: std::ops::Range<u64> = 540..546;
 
 /// Issue 58, Deliver 3, a response that begins in the newest data on two gauges only: the loop
