@@ -100,6 +100,17 @@ pub struct CloseLoopConfig {
     pub max_steps: usize,
     /// Minimum relative reduction of the cross-validated mean square error to accept an effect [0.05].
     pub min_relative_improvement: f64,
+    /// One-sided level of the test by which an effect that lowers the cross-validated mean
+    /// square error by less than `min_relative_improvement` is still accepted [0.001]: the
+    /// reduction of the squared residual, summed per day of the validation window, must have
+    /// a one-sample Student t above its quantile at this level (days − 1 degrees of freedom,
+    /// four days at least); the effect must lower the error in as many folds as the margin
+    /// asks (two; one when there is one fold), and by at least `min_significant_improvement`
+    /// overall. At most 0.05; `0` turns the test off (only the relative margin decides).
+    pub improvement_significance: f64,
+    /// Smallest relative reduction of the cross-validated mean square error the test of
+    /// `improvement_significance` accepts [0.01].
+    pub min_significant_improvement: f64,
     /// Temperature columns for the thermal effect; `None` = every column whose declared unit
     /// (`column_units`) is a temperature unit (see
     /// [`is_temperature_unit`](super::is_temperature_unit)) [None]. A name that is
@@ -147,6 +158,8 @@ impl Default for CloseLoopConfig {
             selection_origins: 3,
             max_steps: 4,
             min_relative_improvement: 0.05,
+            improvement_significance: 0.001,
+            min_significant_improvement: 0.01,
             temperature_columns: None,
             column_units: BTreeMap::new(),
             load: None,
@@ -213,6 +226,26 @@ impl CloseLoopConfig {
     /// ```
     pub fn min_relative_improvement(mut self, f: f64) -> Self {
         self.min_relative_improvement = f;
+        self
+    }
+    /// Sets the level of the test that accepts an effect below the relative margin (`0`: off).
+    ///
+    /// ```
+    /// let c = bamudi_closeloop::CloseLoopConfig::default().improvement_significance(0.0);
+    /// assert_eq!(c.improvement_significance, 0.0);
+    /// ```
+    pub fn improvement_significance(mut self, p: f64) -> Self {
+        self.improvement_significance = p;
+        self
+    }
+    /// Sets the smallest relative reduction the significance test accepts.
+    ///
+    /// ```
+    /// let c = bamudi_closeloop::CloseLoopConfig::default().min_significant_improvement(0.02);
+    /// assert_eq!(c.min_significant_improvement, 0.02);
+    /// ```
+    pub fn min_significant_improvement(mut self, f: f64) -> Self {
+        self.min_significant_improvement = f;
         self
     }
 
@@ -324,6 +357,21 @@ impl CloseLoopConfig {
             return bad(
                 "min_relative_improvement",
                 format!("must be >= 0, got {}", self.min_relative_improvement),
+            );
+        }
+        if !(self.improvement_significance >= 0.0 && self.improvement_significance <= 0.05) {
+            return bad(
+                "improvement_significance",
+                format!(
+                    "must be in [0, 0.05] (0 turns the test off), got {}",
+                    self.improvement_significance
+                ),
+            );
+        }
+        if self.min_significant_improvement.is_nan() || self.min_significant_improvement < 0.0 {
+            return bad(
+                "min_significant_improvement",
+                format!("must be >= 0, got {}", self.min_significant_improvement),
             );
         }
         if !(self.significance > 0.0 && self.significance < 1.0) {

@@ -27,8 +27,11 @@
 //!    the model, re-calibrates and back-fits on the calibration window (one origin: each
 //!    origin would cost a calibration per candidate), re-fits the effects at the later
 //!    origins, and accepts the best only if it then lowers the cross-validated mean square
-//!    error by more than [`CloseLoopConfig::min_relative_improvement`] (the data-driven term
-//!    must beat the best physical effect by that margin too); repeats until the calibration
+//!    error by more than [`CloseLoopConfig::min_relative_improvement`], or by less but
+//!    significantly ([`CloseLoopConfig::improvement_significance`]: a Student t over the
+//!    days of the validation window, for an effect below the margin only; a data-driven
+//!    term is preferred to the best physical effect only when it beats it by the margin);
+//!    repeats until the calibration
 //!    and validation residuals pass the checks or nothing improves;
 //! 5. re-fits the accepted effects on every row selection used and reports the error before
 //!    and after on the test window (`error_window` in the report);
@@ -214,6 +217,11 @@ pub struct CandidateScore {
     /// Relative reduction of that MSE after re-calibration (what the decision uses).
     #[serde(default)]
     pub recalibrated_relative_improvement: Option<f64>,
+    /// Student t of that reduction over the days of the validation window, with the number of
+    /// days (`improvement_significance`'s test; `None` when not confirmed, or when the t is
+    /// infinite because the reduction is the same every day).
+    #[serde(default)]
+    pub recalibrated_improvement_t: Option<(f64, usize)>,
 }
 
 /// One iteration of the loop.

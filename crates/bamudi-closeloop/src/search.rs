@@ -51,6 +51,10 @@ struct Screened {
     from_fold: usize,
     /// Held-out MSE gain over the reference (residual, or residual minus nuisance-only fit).
     gain: f64,
+    /// Whether the gain passes the screening's looser form of the significance test
+    /// ([`SCREENING_LEVEL_FACTOR`]): a candidate gaining too little for the margin is then
+    /// confirmed too, in a slot the margin's candidates leave.
+    significant: bool,
 }
 
 /// Everything fixed during one run of the loop.
@@ -197,7 +201,8 @@ impl Loop<'_> {
     }
 
     /// One step: screen every candidate, confirm the most promising by re-calibrating with
-    /// each, and accept the best confirmed one if it clears the margin.
+    /// each, and accept the best confirmed one if it clears the margin or passes the
+    /// significance test ([`Loop::improvement_t`]).
     pub(super) fn search(
         &self,
         st: &State,
@@ -211,22 +216,40 @@ impl Loop<'_> {
         // re-calibrated at 1.07 microstrain²), so a candidate is confirmed unless screening
         // credits it with less than half the margin
         let picks = confirmation_picks(&screened, 0.5 * margin, self.cfg.confirm_candidates);
-        let folds_before = self.fold_mses(&self.cv_of(fold_r));
+        let cv_before = self.cv_of(fold_r);
+        let folds_before = self.fold_mses(&cv_before);
         let mut trials: Vec<Trial> = vec![];
         for &k in &picks {
             let (state, settled) =
                 self.with_effect(st, screened[k].fitted.clone(), screened[k].from_fold)?;
             let cv = self.cv_residual(&state)?;
             let mse = mse_rows(&cv, self.val);
-            let supported = self.supported_folds(&folds_before, &self.fold_mses(&cv));
+            let folds_after = self.fold_mses(&cv);
+            let supported = self.supported_folds(&folds_before, &folds_after);
+            let lower = folds_before
+                .iter()
+                .zip(&folds_after)
+                .filter(|(b, a)| a < b)
+                .count();
+            let (t, days) = self.improvement_t(&cv_before, &cv);
+            // the route for what the margin cannot take: an effect above the margin that
+            // lacks the folds' support (a recent step, which a drift line fits as well) stays
+            // rejected by the fold rule
+            let significant = mse_before - mse <= margin
+                && lower >= self.folds_needed()
+                && mse_before - mse > self.cfg.min_significant_improvement * mse_before
+                && t > t_critical(self.cfg.improvement_significance, days);
             screened[k].score.recalibrated_heldout_mse = Some(mse);
             screened[k].score.recalibrated_relative_improvement = Some(1.0 - mse / mse_before);
+            // an infinite t (no spread over the days) is not written: JSON has no infinity
+            screened[k].score.recalibrated_improvement_t = t.is_finite().then_some((t, days));
             trials.push(Trial {
                 index: k,
                 state,
                 settled,
                 mse,
                 supported,
+                significant: significant.then_some((t, days)),
             });
         }
         let choice = preferred(
@@ -241,7 +264,8 @@ impl Loop<'_> {
     }
 
     /// The step's outcome for the chosen trial (position in `trials`), if any: accepted when it
-    /// lowers the cross-validated MSE by more than the margin (then it finishes its back-fit).
+    /// lowers the cross-validated MSE by more than the margin in enough folds, or passes the
+    /// significance test (then it finishes its back-fit).
     fn decide(
         &self,
         screened: &[Screened],
@@ -280,7 +304,9 @@ impl Loop<'_> {
             screened[trials[at].index].score.name.clone(),
         );
         let better = pct(1.0 - mse / mse_before);
-        if mse_before - mse <= margin {
+        let by_margin = trials[at].supported >= self.folds_needed() && mse_before - mse > margin;
+        let significant = trials[at].significant.filter(|_| !by_margin);
+        if !by_margin && significant.is_none() {
             let decision = format!(
                 "no candidate lowers the cross-validated MSE by {min_pct:.1} % after re-calibration (best: {name}, {better:.1} %)"
             );
@@ -293,9 +319,15 @@ impl Loop<'_> {
         if !trial.settled {
             self.recalibrate_and_backfit(&mut trial.state, MAX_BACKFIT_ROUNDS - CONFIRM_ROUNDS)?;
         }
-        let decision = format!(
-            "accepted {name}: cross-validated MSE {mse_before:.3} -> {mse:.3} {unit}^2 after re-calibration ({better:.1} % better, threshold {min_pct:.1} %)"
-        );
+        let decision = match significant {
+            None => format!(
+                "accepted {name}: cross-validated MSE {mse_before:.3} -> {mse:.3} {unit}^2 after re-calibration ({better:.1} % better, threshold {min_pct:.1} %)"
+            ),
+            Some((t, days)) => format!(
+                "accepted {name}: cross-validated MSE {mse_before:.3} -> {mse:.3} {unit}^2 after re-calibration ({better:.1} % better, below the {min_pct:.1} % margin but significant: t = {t:.1} over {days} days of the validation window, one-sided level {})",
+                self.cfg.improvement_significance
+            ),
+        };
         Ok(SearchOutcome {
             accepted: Some((trial.state, name, decision.clone())),
             decision,
@@ -322,8 +354,11 @@ impl Loop<'_> {
                 .zip(fold_r)
                 .map(|(&(o, _), r)| r - n.fit(r, &self.before(o)))
                 .collect();
-            mse_rows(&self.cv_of(&left), self.val)
+            self.cv_of(&left)
         });
+        let plain = self.cv_of(fold_r);
+        // at most 0.5 (a critical value of 0): the configured level is at most 0.05
+        let screening_level = (SCREENING_LEVEL_FACTOR * self.cfg.improvement_significance).min(0.5);
         let mut out = vec![];
         for effect in library {
             if accepted.contains(&effect.name()) && !effect.repeatable() {
@@ -333,11 +368,15 @@ impl Loop<'_> {
             let Some((fitted, from_fold, cv)) = self.screen_one(st, effect, fold_r, nu)? else {
                 continue;
             };
-            let reference = match (nu, nuisance_only) {
-                (Some(_), Some(mse)) => mse,
-                _ => mse_before,
+            let (reference, reference_cv) = match (nu, &nuisance_only) {
+                (Some(_), Some(left)) => (mse_rows(left, self.val), left),
+                _ => (mse_before, &plain),
             };
             let mse = mse_rows(&cv, self.val);
+            let (t, days) = self.improvement_t(reference_cv, &cv);
+            let significant = reference - mse
+                > 0.5 * self.cfg.min_significant_improvement * mse_before
+                && t > t_critical(screening_level, days);
             out.push(Screened {
                 score: CandidateScore {
                     name: fitted.report.name.clone(),
@@ -346,8 +385,10 @@ impl Loop<'_> {
                     relative_improvement: (reference - mse) / mse_before,
                     recalibrated_heldout_mse: None,
                     recalibrated_relative_improvement: None,
+                    recalibrated_improvement_t: None,
                 },
                 gain: reference - mse,
+                significant,
                 fitted,
                 from_fold,
             });
@@ -441,6 +482,41 @@ impl Loop<'_> {
             .zip(after)
             .filter(|(b, a)| *a < &(*b * (1.0 - f)))
             .count()
+    }
+
+    /// The held-out reduction of the squared residual from `before` to `after`, summed over
+    /// the rows and gauges of each day of the validation window, as a one-sample Student t
+    /// statistic over the days (mean over its standard error), with the number of days. Days
+    /// are the blocks because a residual is correlated within hours (the lockage cycle, the
+    /// daily temperature) far more than across days. Days are counted from the record's
+    /// first row, so the window's first and last may be partial; `(0, days)` with fewer than
+    /// three days (and [`t_critical`] passes nothing with fewer than four).
+    fn improvement_t(&self, before: &DMatrix<f64>, after: &DMatrix<f64>) -> (f64, usize) {
+        let mut sums: Vec<f64> = vec![];
+        let mut day = None;
+        for &i in self.val {
+            let d = (self.feats.time_h[i] / 24.0).floor();
+            if day != Some(d) {
+                sums.push(0.0);
+                day = Some(d);
+            }
+            let squares = |m: &DMatrix<f64>| m.row(i).iter().map(|v| v * v).sum::<f64>();
+            if let Some(last) = sums.last_mut() {
+                *last += squares(before) - squares(after);
+            }
+        }
+        let n = sums.len();
+        if n < 3 {
+            return (0.0, n);
+        }
+        let mean = sums.iter().sum::<f64>() / n as f64;
+        let var = sums.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let t = match var > 0.0 {
+            true => mean / (var / n as f64).sqrt(),
+            false if mean > 0.0 => f64::INFINITY,
+            false => 0.0,
+        };
+        (t, n)
     }
 
     /// Folds an accepted effect must improve: two (one when there is one fold). An effect
@@ -628,12 +704,34 @@ struct Trial {
     settled: bool,
     mse: f64,
     supported: usize,
+    /// `(t, days)` of [`Loop::improvement_t`] when the trial passes the significance test
+    /// (lower in enough folds, above the floor, `t` above its critical value).
+    significant: Option<(f64, usize)>,
+}
+
+/// The screening tests at this multiple of `improvement_significance` (a looser level): it
+/// only chooses what is re-calibrated, and the decision tests again at the level itself.
+const SCREENING_LEVEL_FACTOR: f64 = 10.0;
+
+/// The one-sided critical value of Student's t with `days − 1` degrees of freedom at `level`;
+/// infinite (no effect passes) when the test is off or there are fewer than four days.
+fn t_critical(level: f64, days: usize) -> f64 {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    if level <= 0.0 || days < 4 {
+        return f64::INFINITY;
+    }
+    StudentsT::new(0.0, 1.0, (days - 1) as f64)
+        .map(|d| d.inverse_cdf(1.0 - level))
+        .unwrap_or(f64::INFINITY)
 }
 
 /// The trial (position in `trials`) the step prefers among those improving at least `need`
-/// folds: the best physical effect unless the best data-driven term lowers its MSE by the
-/// relative margin `min_relative` (as it would have to in the next step once the physical
-/// effect is accepted).
+/// folds by the margin or passing the significance test: the best physical effect unless the
+/// best data-driven term lowers its MSE by the relative margin `min_relative` more. A trial
+/// that passes only the significance test lowers the MSE by less than the margin, so it never
+/// displaces one that clears the margin of its own kind; a physical effect that passes only
+/// the test is preferred to a data-driven term that does not beat it by the margin (the
+/// physical explanation first, as for effects that clear the margin).
 fn preferred(
     screened: &[Screened],
     trials: &[Trial],
@@ -643,7 +741,10 @@ fn preferred(
     let data_driven = |t: &Trial| screened[t.index].fitted.effect.kind() == EffectKind::DataDriven;
     let best = |want: bool| {
         (0..trials.len())
-            .filter(|&i| data_driven(&trials[i]) == want && trials[i].supported >= need)
+            .filter(|&i| {
+                data_driven(&trials[i]) == want
+                    && (trials[i].supported >= need || trials[i].significant.is_some())
+            })
             .min_by(|&a, &b| trials[a].mse.total_cmp(&trials[b].mse))
     };
     match (best(false), best(true)) {
@@ -669,16 +770,19 @@ fn sort_confirmed_first(screened: &mut [Screened]) {
 
 /// Which screened candidates (indices into `screened`, best gain first) are re-calibrated:
 /// those gaining more than `min_gain`, at most `k` of them, always including the best library
-/// effect and the best generic term among them so that the preference rule can be applied.
+/// effect and the best generic term among them so that the preference rule can be applied;
+/// then, in the slots left, those that pass the screening's significance test only.
 fn confirmation_picks(screened: &[Screened], min_gain: f64, k: usize) -> Vec<usize> {
-    let eligible: Vec<usize> = (0..screened.len())
+    let by_gain: Vec<usize> = (0..screened.len())
         .filter(|&i| screened[i].gain > min_gain)
         .collect();
+    let by_test =
+        (0..screened.len()).filter(|&i| screened[i].gain <= min_gain && screened[i].significant);
     let generic = |i: &usize| screened[*i].fitted.effect.kind() == EffectKind::DataDriven;
     let mut picks: Vec<usize> = vec![];
-    picks.extend(eligible.iter().find(|i| !generic(i)));
-    picks.extend(eligible.iter().find(|i| generic(i)));
-    for i in eligible {
+    picks.extend(by_gain.iter().find(|i| !generic(i)));
+    picks.extend(by_gain.iter().find(|i| generic(i)));
+    for i in by_gain.iter().copied().chain(by_test) {
         if picks.len() >= k {
             break;
         }

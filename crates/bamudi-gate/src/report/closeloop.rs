@@ -484,13 +484,13 @@ fn steps_section(s: &mut String, r: &CloseLoopReport) {
     for st in &r.steps {
         let _ = writeln!(
             s,
-            "### Step {} — {}\n\n| candidate | covariates | screened cross-validated MSE (microstrain²) | screened improvement | cross-validated MSE after re-calibration (microstrain²) | improvement after re-calibration |\n|---|---|---|---|---|---|",
+            "### Step {} — {}\n\n| candidate | covariates | screened cross-validated MSE (microstrain²) | screened improvement | cross-validated MSE after re-calibration (microstrain²) | improvement after re-calibration | its t over the validation window's days |\n|---|---|---|---|---|---|---|",
             st.step, st.decision
         );
         for c in &st.candidates {
             let _ = writeln!(
                 s,
-                "| {} | {} | {:.4} | {:.1} % | {} | {} |",
+                "| {} | {} | {:.4} | {:.1} % | {} | {} | {} |",
                 c.name,
                 c.covariates.join(", "),
                 c.heldout_mse,
@@ -499,6 +499,8 @@ fn steps_section(s: &mut String, r: &CloseLoopReport) {
                     .map_or("–".into(), |v| format!("{v:.4}")),
                 c.recalibrated_relative_improvement
                     .map_or("–".into(), |v| format!("{:.1} %", 100.0 * v)),
+                c.recalibrated_improvement_t
+                    .map_or("–".into(), |(t, days)| format!("{t:.1} ({days} days)")),
             );
         }
         s.push('\n');

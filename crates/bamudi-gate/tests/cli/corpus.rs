@@ -1904,6 +1904,21 @@ fn close_loop_config_files(base: &Base) -> Vec<Case> {
             "min_relative_improvement = nan\n",
             &["min_relative_improvement"],
         ),
+        lc(
+            "significance_level_too_loose",
+            "improvement_significance = 0.2\n",
+            &["improvement_significance", "0.05"],
+        ),
+        lc(
+            "nan_significance_level",
+            "improvement_significance = nan\n",
+            &["improvement_significance"],
+        ),
+        lc(
+            "negative_significant_improvement",
+            "min_significant_improvement = -0.01\n",
+            &["min_significant_improvement"],
+        ),
         lc("negative_max_steps", "max_steps = -1\n", &["max_steps"]),
         lc("max_steps_string", "max_steps = \"four\"\n", &["max_steps"]),
         lc(
