@@ -87,7 +87,7 @@ pub use error::{CloseLoopError, Result};
 pub use events::{Alarm, AlarmWindow, EventScan, GaugeScale};
 pub use features::{Features, TEMPERATURE_RANGE_C, is_temperature_unit, temperature_range};
 pub use record::{IngestConfig, MeasuredRecord, MissingPolicy, from_table, parse_csv, read_csv};
-pub use regime::CalibratedAfterStep;
+pub use regime::{CalibratedAfterStep, CalibratedBeforeChange};
 pub use sensor::{
     AttributionTest, CalibrationRows, SensorAction, SensorFinding, SensorKind, SensorReport,
     WithheldAlarm,
@@ -354,6 +354,12 @@ pub struct CloseLoopReport {
     /// `n_calibration`); `None` when the loop ran once.
     #[serde(default)]
     pub after_step: Option<CalibratedAfterStep>,
+    /// The gap's change dated inside the calibration window by the first run's track, and the
+    /// loop run again with the model calibrated on the window's rows before it (everything
+    /// above is that run's, but for the first calibration's figures, as with `after_step`);
+    /// `None` when the loop did not.
+    #[serde(default)]
+    pub before_change: Option<CalibratedBeforeChange>,
     /// The changes seen on several gauges together after the calibration window, each tested
     /// for a library effect from its day on beside the gap and one sensor, and the effects
     /// added (`None` when no such change was seen, or `sensor.onset_effects` is off).
@@ -413,20 +419,35 @@ pub fn close_loop_with(
     let started = std::time::Instant::now();
     let w = Windows::of(rec, cfg)?;
     let first = run_on(rec, calibrator, cfg, library, &w)?;
-    let mut out = match regime::step_in_window(&first.report, rec, &w.cal) {
+    // a step inside the window: calibrated after it when the rows after it hold one gap
+    let after_step = match regime::step_in_window(&first.report, rec, &w.cal) {
         Some(s) => {
             let again = Windows {
                 cal: s.rows.clone(),
                 step: Some(s.size),
-                ..w
+                ..w.clone()
             };
             let out = run_on(rec, calibrator, cfg, library, &again)?;
-            match s.first_holds_one_gap(&first.report) || s.second_holds_one_gap(&out.report) {
-                true => regime::merged(first, out, s.day),
-                false => first,
-            }
+            (s.first_holds_one_gap(&first.report) || s.second_holds_one_gap(&out.report))
+                .then_some((out, s.day))
         }
-        None => first,
+        None => None,
+    };
+    // otherwise a change the track dates inside the window (a growth, or a step whose rows
+    // after it do not hold one gap): calibrated before it
+    let mut out = match after_step {
+        Some((out, day)) => regime::merged(first, out, day),
+        None => match regime::change_in_window(&first.report, rec, &w.cal) {
+            Some(c) => {
+                let again = Windows {
+                    calibrate_on: Some(c.rows.clone()),
+                    ..w
+                };
+                let out = run_on(rec, calibrator, cfg, library, &again)?;
+                regime::merged_before(first, out, &c)
+            }
+            None => first,
+        },
     };
     out.report.wall_time_s = started.elapsed().as_secs_f64();
     Ok(out)
@@ -448,7 +469,8 @@ fn run_on(
         y: &rec.y,
         feats: &feats,
         cal: &w.cal,
-        fit_rows: &w.cal,
+        calib: w.calib(),
+        fit_rows: w.calib(),
         val: &w.validation,
         sel: &w.selection,
         test: &w.test,
@@ -479,7 +501,7 @@ fn run_on(
     let first = base.as_ref().map_or(&st, |b| &b.state).clone();
     let applied = correct::apply_and_recalibrate(&lp, rec, &mut pre, &first, base)?;
     let lp_y = lp.with_y(&applied.y);
-    let lp = lp_y.with_fit_rows(applied.rows.rows(&w.cal));
+    let lp = lp_y.with_fit_rows(applied.rows.rows(w.calib()));
     if let Some(s) = applied.state {
         st = s;
     }
@@ -499,8 +521,12 @@ fn run_on(
 /// again after a change of the gap inside the calibration window calibrates on the window's
 /// rows after it ([`regime`]): `cal` then starts later, and effects are fitted from its first
 /// row.
+#[derive(Clone)]
 struct Windows {
     cal: Vec<usize>,
+    /// The window's rows the calibrator reads when not all of `cal`: those before the gap
+    /// began to move inside the window ([`regime::ChangeInWindow`]).
+    calibrate_on: Option<Vec<usize>>,
     /// The gap's step when the loop runs again after it ([`Loop::step`]).
     step: Option<f64>,
     validation: Vec<usize>,
@@ -533,12 +559,20 @@ impl Windows {
         let origin = |j: usize| n_cal + (j * (n_sel - n_cal)) / k;
         Ok(Self {
             cal: (0..n_cal).collect(),
+            calibrate_on: None,
             step: None,
             validation: (n_cal..n_sel).collect(),
             selection: (0..n_sel).collect(),
             test: (n_sel..n).collect(),
             folds: (0..k).map(|j| (origin(j), origin(j + 1))).collect(),
         })
+    }
+}
+
+impl Windows {
+    /// The window's rows the calibrator reads.
+    fn calib(&self) -> &[usize] {
+        self.calibrate_on.as_deref().unwrap_or(&self.cal)
     }
 }
 
@@ -897,7 +931,7 @@ fn track_theta(
         }
     }
     let mut calibrated = vec![false; rec.time_h.len()];
-    for &i in lp.cal {
+    for &i in lp.calib {
         calibrated[i] = true;
     }
     let input = track::TrackInput {
@@ -1107,6 +1141,7 @@ fn outcome(
         theta_after_effect_sd: effect_sd,
         onset,
         after_step: None,
+        before_change: None,
     };
     Ok(CloseLoopOutcome {
         report,

@@ -64,7 +64,11 @@ pub(super) struct Loop<'a> {
     pub(super) y: &'a DMatrix<f64>,
     pub(super) feats: &'a Features,
     pub(super) cal: &'a [usize],
-    /// The rows a calibration reads: the calibration window, or with gauges the sensor pass
+    /// The window's rows the calibrator reads: `cal`, unless the loop runs again on the rows
+    /// before the gap began to move inside the window ([`crate::regime`]); effects are still
+    /// fitted on `cal`.
+    pub(super) calib: &'a [usize],
+    /// The rows a calibration reads: `calib`, or with gauges the sensor pass
     /// set aside in it, the window's rows where no gauge is set aside
     /// ([`super::correct::apply_and_recalibrate`]).
     pub(super) fit_rows: &'a [usize],
@@ -102,6 +106,7 @@ impl Loop<'_> {
             y,
             feats: self.feats,
             cal: self.cal,
+            calib: self.calib,
             fit_rows: self.fit_rows,
             val: self.val,
             sel: self.sel,

@@ -321,7 +321,7 @@ fn without_set_aside(
         return None;
     }
     let (y, mask) = sensor::apply(found, lp.y, &first.mean, &rec.time_h, None);
-    let CalibrationRows::WithoutSetAside { rows, .. } = CalibrationRows::of(lp.cal, &mask) else {
+    let CalibrationRows::WithoutSetAside { rows, .. } = CalibrationRows::of(lp.calib, &mask) else {
         return None;
     };
     match lp.with_y(&y).with_fit_rows(&rows).calibrate(&y) {
@@ -722,8 +722,8 @@ fn earlier_onset(
         return None;
     }
     let cut = t[f.from_row] - REDATE_DAYS * 24.0;
-    let rows: Vec<usize> = lp.cal.iter().copied().filter(|&c| t[c] < cut).collect();
-    if 2 * rows.len() < lp.cal.len() {
+    let rows: Vec<usize> = lp.calib.iter().copied().filter(|&c| t[c] < cut).collect();
+    if 2 * rows.len() < lp.calib.len() {
         return None;
     }
     let y = sensor::apply(others, lp.y, &first.mean, t, None).0;
@@ -838,10 +838,10 @@ pub(super) fn apply_and_recalibrate(
             rows: CalibrationRows::Window,
         });
     }
-    let rows = CalibrationRows::of(lp.cal, &mask);
+    let rows = CalibrationRows::of(lp.calib, &mask);
     let fit_rows: &[usize] = match &rows {
         CalibrationRows::WithoutSetAside { rows, .. } => rows,
-        _ => lp.cal,
+        _ => lp.calib,
     };
     let calibrate = |y: &DMatrix<f64>| -> Result<State> {
         Ok(State::calibrated(
@@ -1341,7 +1341,7 @@ pub(super) fn theta_without(
     }
     // the raw readings on every row of the window: nothing is set aside without corrections
     let raw_y = lp.with_y(&rec.y);
-    let raw = raw_y.with_fit_rows(lp.cal);
+    let raw = raw_y.with_fit_rows(lp.calib);
     let sum = raw.effect_sum(&post.st)?;
     Ok(Some(raw.calibrate_theta(&(&rec.y - sum))?))
 }
@@ -1476,7 +1476,7 @@ pub(super) fn report(
         withheld_gap_alarm: post.withheld_gap_alarm.clone(),
         coincident_findings: post.coincident.clone(),
         calibration_rows: (!post.findings.is_empty())
-            .then(|| CalibrationRows::of(lp.cal, &post.mask)),
+            .then(|| CalibrationRows::of(lp.calib, &post.mask)),
     }))
 }
 

@@ -279,6 +279,46 @@ fn a_gap_step_inside_the_calibration_window_is_calibrated_after() {
     );
 }
 
+/// A gap that grows from 90 in on day 5 to 110 in at the record's end (day 45), through the
+/// calibration window (27 days) and on. No set of the window's rows after the change holds one
+/// gap; the rows before it do. The loop must calibrate again on them, report the gap at the end
+/// with an interval that holds it, keep the error window at the noise, and correct no gauge.
+/// Bounds written before the first run (seeds 11-12).
+#[test]
+fn a_gap_growing_from_inside_the_calibration_window_is_calibrated_before_it() {
+    let gate = ToyGate::default();
+    let gap = |t: f64| 90.0 + 20.0 * ((t - 120.0) / (ROWS as f64 - 1.0 - 120.0)).max(0.0);
+    let grown = |t: f64, g: usize| {
+        let (h_up, h_down) = toy_levels(t);
+        gate.strain(h_up, h_down, gap(t))[g] - gate.strain(h_up, h_down, 90.0)[g]
+    };
+    for seed in [11, 12] {
+        let out = run(seed, grown);
+        let r = &out.report;
+        let b = r
+            .before_change
+            .as_ref()
+            .unwrap_or_else(|| panic!("seed {seed}: not calibrated before: {}", r.conclusion));
+        // the growth is 0.5 in a day: the track dates its onset within a week of day 5
+        assert!(
+            (b.change_day - 5.0).abs() <= 7.0,
+            "seed {seed}: change day {}",
+            b.change_day
+        );
+        let end = gap(ROWS as f64 - 1.0);
+        let t = &r.theta_after;
+        assert!(t.ci95.0 <= end && end <= t.ci95.1, "seed {seed}: {t:?}");
+        // 1.5 x the noise (1 microstrain), as the other error bounds here
+        assert!(
+            r.heldout_rmse_total_after < 1.5,
+            "seed {seed}: {}",
+            r.heldout_rmse_total_after
+        );
+        let findings = r.sensor.as_ref().map_or(0, |s| s.findings.len());
+        assert_eq!(findings, 0, "seed {seed}: {:?}", r.sensor);
+    }
+}
+
 /// A report part as JSON, to compare parts by value.
 fn json<T: serde::Serialize>(v: &T) -> String {
     serde_json::to_string(v).expect("report parts serialise")
