@@ -176,13 +176,7 @@ pub(crate) fn merged(
         theta_whole_window: f.theta_after,
         error_whole_window: f.heldout_rmse_total_after,
     });
-    r.n_calibration = f.n_calibration;
-    r.noise_sd_estimate = f.noise_sd_estimate;
-    r.heldout_rmse_before = f.heldout_rmse_before;
-    r.heldout_rmse_total_before = f.heldout_rmse_total_before;
-    r.theta_before = f.theta_before;
-    r.checks_before = f.checks_before;
-    r.model_adequacy_before = f.model_adequacy_before;
+    first_calibration_as_before(r, f);
     again.residual_before = first.residual_before;
     again
 }
@@ -272,6 +266,14 @@ pub(crate) fn merged_before(
         theta_whole_window: f.theta_after,
         error_whole_window: f.heldout_rmse_total_after,
     });
+    first_calibration_as_before(r, f);
+    again.residual_before = first.residual_before;
+    again
+}
+
+/// The first run's calibration figures as the second run's "before" (the first calibration,
+/// on the whole window, is what the loop started from).
+fn first_calibration_as_before(r: &mut CloseLoopReport, f: CloseLoopReport) {
     r.n_calibration = f.n_calibration;
     r.noise_sd_estimate = f.noise_sd_estimate;
     r.heldout_rmse_before = f.heldout_rmse_before;
@@ -279,6 +281,4 @@ pub(crate) fn merged_before(
     r.theta_before = f.theta_before;
     r.checks_before = f.checks_before;
     r.model_adequacy_before = f.model_adequacy_before;
-    again.residual_before = first.residual_before;
-    again
 }
