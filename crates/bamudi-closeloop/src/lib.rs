@@ -444,7 +444,18 @@ pub fn close_loop_with(
                     ..w
                 };
                 let out = run_on(rec, calibrator, cfg, library, &again)?;
-                regime::merged_before(first, out, &c)
+                // the run is there for the change the first run's alarm dated: one whose track
+                // raises no alarm (a growth from the record's first rows leaves it no rows at
+                // the old gap to compare with) would drop the alarm, so the first run stands
+                match out
+                    .report
+                    .theta_track
+                    .as_ref()
+                    .is_some_and(|t| t.alarm.is_some())
+                {
+                    true => regime::merged_before(first, out, &c),
+                    false => first,
+                }
             }
             None => first,
         },
