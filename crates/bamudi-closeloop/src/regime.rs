@@ -33,7 +33,9 @@
 //! 95 % interval, the loop is run again with the model calibrated on those rows
 //! ([`ChangeInWindow`]). The model's gap is then the gap before the change, its discrepancy is
 //! fitted where the gap was one, and the track and the time-varying gap read the change from
-//! there. Effects are still fitted on the whole window. Measured on the panel's growths from
+//! there. Effects are still fitted on the whole window. That run is kept only when its own
+//! track still raises a change alarm (a growth from the record's first rows leaves a run
+//! calibrated before it no rows at the old gap, and the alarm would be lost). Measured on the panel's growths from
 //! day 5 (seeds 1000 and 1003 of 20 in, design records): the first calibration, on a window
 //! over which the gap grew 11 in, put it at 95.8 and 99.7 in with a discrepancy fitted to the
 //! growth; its track then forecast the test window at 2.1 and 3.2 times the noise, and the
