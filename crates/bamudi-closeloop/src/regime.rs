@@ -24,7 +24,6 @@
 //! run's track over the window, or, when that one moves, on the track of the run calibrated
 //! after the step, over the rest of the record (whose answer is then kept only if its track
 //! holds still).
-
 //!
 //! A gap that begins to move inside the window and goes on moving (a growth) has no rows after
 //! it at one gap, but it has rows before it: when the first run's track raises a change alarm
@@ -35,11 +34,11 @@
 //! fitted where the gap was one, and the track and the time-varying gap read the change from
 //! there. Effects are still fitted on the whole window. That run is kept only when its own
 //! track still raises a change alarm (a growth from the record's first rows leaves a run
-//! calibrated before it no rows at the old gap, and the alarm would be lost). Measured on the panel's growths from
-//! day 5 (seeds 1000 and 1003 of 20 in, design records): the first calibration, on a window
-//! over which the gap grew 11 in, put it at 95.8 and 99.7 in with a discrepancy fitted to the
-//! growth; its track then forecast the test window at 2.1 and 3.2 times the noise, and the
-//! residual it left was taken for one gauge's gain change.
+//! calibrated before it no rows at the old gap, and the alarm would be lost). Measured on the
+//! panel's growths from day 5 (seeds 1000 and 1003 of 20 in, design records): the first
+//! calibration, on a window over which the gap grew 11 in, put it at 95.8 and 99.7 in with a
+//! discrepancy fitted to the growth; its track then forecast the test window at 2.1 and 3.2
+//! times the noise, and the residual it left was taken for one gauge's gain change.
 
 use crate::sensor::MIN_COMPLETE_ROWS;
 use crate::{CloseLoopOutcome, CloseLoopReport, MeasuredRecord, ThetaSummary};
